@@ -1,0 +1,556 @@
+"""Feature-based map merging as done by ROS ``multirobot_map_merge`` (m-explore).
+
+A re-implementation of the estimation half of ``combine_grids::MergingPipeline``
+(hrnr/m-explore, ``map_merge/src/combine_grids/merging_pipeline.cpp``,
+``estimation_internal.h``, ``grid_compositor.cpp``, ``grid_warper.cpp``) and of the OpenCV
+stitching pieces it calls (opencv ``modules/stitching/src/matchers.cpp``:
+``CpuMatcher``, ``AffineBestOf2NearestMatcher``; ``motion_estimators.cpp``:
+``leaveBiggestComponent``, ``findMaxSpanningTree``, ``AffineBasedEstimator``,
+``BundleAdjusterAffinePartial``).
+
+What is followed
+----------------
+* The grid is read as an 8-bit image exactly as the node does (the ``int8`` cells viewed as
+  ``uint8``): free 0, occupied 100, unknown 255; image ``x`` = column, ``y`` = row.
+* AKAZE features with OpenCV's defaults (``cv2.AKAZE_create()``), the node's default finder.
+* Best-of-2-nearest matching both ways with ``match_conf = 0.3`` (a match is kept when
+  ``d1 < (1 - 0.3) d2``, i.e. ratio 0.7), the 2->1 matches added when not already found 1->2.
+* Fewer than 6 matches: no motion. Otherwise ``cv2.estimateAffinePartial2D`` (RANSAC, 3 px,
+  2000 iterations, 0.99, 10 refinement iterations: OpenCV's defaults, as the matcher calls it)
+  and ``confidence = inliers / (8 + 0.3 * matches)`` (Brown and Lowe's coefficients).
+* N maps: the pairwise matrix, the largest connected component of pairs whose confidence is at
+  least the threshold (``leaveBiggestComponent``, with OpenCV's union by rank so that ties go
+  the same way), a maximum spanning tree weighted by inlier counts over every pair of the
+  component that has a motion (even one below the threshold, as OpenCV does), its centre as
+  the reference, the motions chained breadth-first from the centre, then the affine-partial
+  bundle adjustment over the pairs whose confidence exceeds the threshold, renormalised to the
+  centre.
+
+What is not followed
+--------------------
+* Matching is exact (brute-force Hamming) where OpenCV uses approximate FLANN LSH; this can
+  only help the method and makes it deterministic (``seed`` is accepted for a uniform
+  interface and has no effect).
+* The node lets scale float (``estimateAffinePartial2D`` is a similarity). fusionkit returns a
+  rigid transform: the rotation of the similarity and the translation that agrees with it at
+  the centroid of the moving map's features; the scale is kept in ``diagnostics["scale"]``.
+* The node re-centres the merged grid (its origin at minus half its size) and composes the
+  grids by cell-wise maximum; those are output steps and are not reproduced here: transforms
+  are returned in the frame of a chosen reference map instead.
+* ``chaining="corrected"`` composes the chain in the right order (see :func:`estimate_maps`);
+  ``chaining="shipped"`` reproduces the order OpenCV uses.
+
+References
+----------
+J. Hörner, "Map-merging for multi-robot system", Bachelor's thesis, Charles University, 2016.
+M. Brown and D. G. Lowe, "Automatic panoramic image stitching using invariant features",
+IJCV 74(1), 2007.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..errors import InputError
+from ..grid import OccupancyGrid
+from ..transform import Transform2D
+from ._common import PairEstimate, Stopwatch, cell_to_map, make_options, prepare_pair
+
+__all__ = ["MapMergeOptions", "MapsEstimate", "estimate_pair", "estimate_maps", "METHOD"]
+
+METHOD = "map-merge"
+
+
+@dataclass(frozen=True)
+class MapMergeOptions:
+    """Settings of the feature-based merger (defaults are the node's and OpenCV's).
+
+    Attributes
+    ----------
+    confidence : float
+        ``estimation_confidence``: least pair confidence for a pair to count (> 0).
+    match_conf : float
+        OpenCV's ``match_conf``; a nearest neighbour is kept when its distance is below
+        ``(1 - match_conf)`` times the second nearest's.
+    num_matches_thresh1 : int
+        Fewest matches for which a motion is estimated.
+    ransac_reproj_threshold : float
+        RANSAC inlier distance (pixels = cells).
+    ransac_max_iters : int
+        RANSAC iterations.
+    ransac_confidence : float
+        RANSAC confidence, in (0, 1).
+    refine_iters : int
+        Levenberg-Marquardt iterations refining the RANSAC motion on its inliers.
+    bundle_adjust : bool
+        Run the affine-partial bundle adjustment after chaining (N maps only).
+    """
+
+    confidence: float = 1.0
+    match_conf: float = 0.3
+    num_matches_thresh1: int = 6
+    ransac_reproj_threshold: float = 3.0
+    ransac_max_iters: int = 2000
+    ransac_confidence: float = 0.99
+    refine_iters: int = 10
+    bundle_adjust: bool = True
+
+    def __post_init__(self):
+        if not self.confidence > 0:
+            raise InputError(f"confidence must be > 0, got {self.confidence}")
+        if not 0 <= self.match_conf < 1:
+            raise InputError(f"match_conf must be in [0, 1), got {self.match_conf}")
+        if self.num_matches_thresh1 < 3:
+            raise InputError(f"num_matches_thresh1 must be >= 3, got {self.num_matches_thresh1}")
+        if not self.ransac_reproj_threshold > 0:
+            raise InputError(f"ransac_reproj_threshold must be > 0 cells, got {self.ransac_reproj_threshold}")
+        if self.ransac_max_iters < 1 or self.refine_iters < 0:
+            raise InputError("ransac_max_iters must be >= 1 and refine_iters >= 0")
+        if not 0 < self.ransac_confidence < 1:
+            raise InputError(f"ransac_confidence must be in (0, 1), got {self.ransac_confidence}")
+
+
+# -- features and pairwise motion ------------------------------------------------------------
+
+@dataclass(frozen=True)
+class _Features:
+    points: np.ndarray        # (K, 2) float32 image coordinates (x = col, y = row)
+    descriptors: np.ndarray | None
+
+
+@dataclass
+class _Pair:
+    """OpenCV's ``MatchesInfo`` for an ordered pair (src -> dst)."""
+
+    H: np.ndarray | None = None                    # 3x3, maps src image points to dst
+    matches: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))  # (query, train)
+    inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    num_inliers: int = 0
+    confidence: float = 0.0
+
+    def reversed(self) -> "_Pair":
+        return _Pair(None if self.H is None else np.linalg.inv(self.H), self.matches[:, ::-1].copy(),
+                     self.inliers.copy(), self.num_inliers, self.confidence)
+
+
+def grid_image(grid: OccupancyGrid) -> np.ndarray:
+    """The node's view of a grid: the ``int8`` cells as ``uint8`` (free 0, occupied 100,
+    unknown 255), row 0 first."""
+    return np.ascontiguousarray(grid.data).view(np.uint8)
+
+
+def _features(grid: OccupancyGrid) -> _Features:
+    kps, desc = cv2.AKAZE_create().detectAndCompute(grid_image(grid), None)
+    pts = np.array([k.pt for k in kps], np.float32).reshape(-1, 2)
+    return _Features(pts, desc if len(kps) else None)
+
+
+def _match(f1: _Features, f2: _Features, match_conf: float) -> np.ndarray:
+    """OpenCV ``CpuMatcher``: best of two nearest neighbours both ways; rows ``(query, train)``
+    with query in ``f1`` and train in ``f2``."""
+    if f1.descriptors is None or f2.descriptors is None:
+        return np.zeros((0, 2), np.int64)
+    bf = cv2.BFMatcher(cv2.NORM_HAMMING)
+    ratio = 1.0 - match_conf
+    out, seen = [], set()
+    for m in bf.knnMatch(f1.descriptors, f2.descriptors, k=2):
+        if len(m) == 2 and m[0].distance < ratio * m[1].distance:
+            out.append((m[0].queryIdx, m[0].trainIdx))
+            seen.add((m[0].queryIdx, m[0].trainIdx))
+    for m in bf.knnMatch(f2.descriptors, f1.descriptors, k=2):
+        if len(m) == 2 and m[0].distance < ratio * m[1].distance:
+            if (m[0].trainIdx, m[0].queryIdx) not in seen:
+                out.append((m[0].trainIdx, m[0].queryIdx))
+    return np.array(out, np.int64).reshape(-1, 2)
+
+
+def _pair_motion(f1: _Features, f2: _Features, opts: MapMergeOptions) -> _Pair:
+    """OpenCV ``AffineBestOf2NearestMatcher::match`` (partial affine)."""
+    pair = _Pair(matches=_match(f1, f2, opts.match_conf))
+    if len(pair.matches) < opts.num_matches_thresh1:
+        pair.inliers = np.zeros(len(pair.matches), bool)
+        return pair
+    src = f1.points[pair.matches[:, 0]].reshape(-1, 1, 2)
+    dst = f2.points[pair.matches[:, 1]].reshape(-1, 1, 2)
+    m, mask = cv2.estimateAffinePartial2D(
+        src, dst, method=cv2.RANSAC, ransacReprojThreshold=opts.ransac_reproj_threshold,
+        maxIters=opts.ransac_max_iters, confidence=opts.ransac_confidence,
+        refineIters=opts.refine_iters)
+    if m is None or math.hypot(m[0, 0], m[1, 0]) < 1e-9:
+        # no motion; a degenerate (zero-scale) one cannot be inverted and counts as none
+        pair.inliers = np.zeros(len(pair.matches), bool)
+        return pair
+    pair.inliers = mask.ravel().astype(bool)
+    pair.num_inliers = int(pair.inliers.sum())
+    # confidence = inliers / (8 + 0.3 * matches)  (Brown and Lowe)
+    pair.confidence = pair.num_inliers / (8 + 0.3 * len(pair.matches))
+    pair.H = np.vstack([m, [0.0, 0.0, 1.0]])
+    return pair
+
+
+def _rigid_cells(sim_px: np.ndarray, anchor_cells: np.ndarray) -> tuple[Transform2D, float]:
+    """A similarity between image pixel coordinates (moving -> fixed) as a rigid transform
+    between cell frames (cell = pixel + 0.5) and its scale.
+
+    The rigid transform keeps the similarity's rotation and agrees with it at ``anchor_cells``
+    (the centroid of the moving map's features, cell frame)."""
+    a = sim_px[:2, :2]
+    t = sim_px[:2, 2]
+    scale = math.hypot(a[0, 0], a[1, 0])
+    theta = math.atan2(a[1, 0], a[0, 0])
+    # pixel similarity -> cell similarity: c' = A (c - 0.5) + t + 0.5
+    t_cell = t + 0.5 - a @ np.array([0.5, 0.5])
+    target = a @ anchor_cells + t_cell
+    c, s = math.cos(theta), math.sin(theta)
+    r = np.array([[c, -s], [s, c]])
+    tr = target - r @ anchor_cells
+    return Transform2D(tr[0], tr[1], theta), scale
+
+
+def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, seed: int = 0, **options) -> PairEstimate:
+    """Estimate the transform from map ``b``'s frame into map ``a``'s frame by AKAZE features.
+
+    Parameters
+    ----------
+    a, b : OccupancyGrid
+        The fixed and the moving map; ``b`` is resampled to ``a``'s resolution if they differ.
+    seed : int
+        Unused: the method is deterministic (accepted for a uniform interface).
+    **options
+        Fields of :class:`MapMergeOptions`.
+
+    Returns
+    -------
+    PairEstimate
+        ``confidence`` is ``inliers / (8 + 0.3 matches)``; ``accepted`` when it is at least
+        ``options.confidence`` (1.0), as ``leaveBiggestComponent`` keeps a pair. ``transform``
+        is None when fewer than ``num_matches_thresh1`` matches or no motion were found.
+        ``diagnostics`` holds ``keypoints`` (a, b), ``matches``, ``inliers``, ``scale`` and
+        the pixel-frame ``similarity`` (b -> a, 2x3).
+    """
+    clock = Stopwatch()
+    opts = make_options(MapMergeOptions, options, METHOD)
+    a, b = prepare_pair(a, b)
+    fa, fb = _features(a), _features(b)
+    # the pipeline matches image 0 against image 1: H maps a's pixels to b's
+    pair = _pair_motion(fa, fb, opts)
+    diag = {"keypoints": (len(fa.points), len(fb.points)), "matches": len(pair.matches),
+            "inliers": pair.num_inliers}
+    if pair.H is None:
+        return PairEstimate(None, pair.confidence, False, (), METHOD, clock(), diag)
+    sim = np.linalg.inv(pair.H)                      # b's pixels -> a's pixels
+    anchor = fb.points[pair.matches[pair.inliers, 1]].astype(float).mean(axis=0) + 0.5
+    cell_t, scale = _rigid_cells(sim, anchor)
+    t = cell_to_map(a, b, cell_t)
+    diag.update(scale=scale, similarity=sim[:2].copy())
+    accepted = pair.confidence >= opts.confidence
+    return PairEstimate(t, float(pair.confidence), bool(accepted), ((t, float(pair.confidence)),),
+                        METHOD, clock(), diag)
+
+
+# -- N maps ------------------------------------------------------------------------------------
+
+class _DisjointSets:
+    """OpenCV ``cv::detail::DisjointSets`` (union by rank, path compression, stale sizes)."""
+
+    def __init__(self, n: int):
+        self.parent = list(range(n))
+        self.rank = [0] * n
+        self.size = [1] * n
+
+    def find(self, e: int) -> int:
+        s = e
+        while s != self.parent[s]:
+            s = self.parent[s]
+        while e != self.parent[e]:
+            self.parent[e], e = s, self.parent[e]
+        return s
+
+    def merge(self, s1: int, s2: int) -> int:
+        if self.rank[s1] < self.rank[s2]:
+            self.parent[s1] = s2
+            self.size[s2] += self.size[s1]
+            return s2
+        if self.rank[s2] < self.rank[s1]:
+            self.parent[s2] = s1
+            self.size[s1] += self.size[s2]
+            return s1
+        self.parent[s1] = s2
+        self.rank[s2] += 1
+        self.size[s2] += self.size[s1]
+        return s2
+
+
+def _biggest_component(conf: np.ndarray, threshold: float) -> list[int]:
+    """OpenCV ``leaveBiggestComponent``: indices of the largest set of maps joined by pairs of
+    confidence >= ``threshold``."""
+    n = conf.shape[0]
+    comps = _DisjointSets(n)
+    for i in range(n):
+        for j in range(n):
+            if conf[i, j] < threshold:
+                continue
+            c1, c2 = comps.find(i), comps.find(j)
+            if c1 != c2:
+                comps.merge(c1, c2)
+    max_comp = int(np.argmax(comps.size))
+    return [i for i in range(n) if comps.find(i) == max_comp]
+
+
+def _max_spanning_tree(pairs: dict, n: int):
+    """OpenCV ``findMaxSpanningTree`` over ``n`` maps (local indices): Kruskal on the pairs that
+    have a motion, weighted by inliers. Returns (adjacency lists, centres)."""
+    edges = [(float(pairs[i, j].num_inliers), i, j) for i in range(n) for j in range(n)
+             if i != j and pairs[i, j].H is not None]
+    edges.sort(key=lambda e: -e[0])                  # stable: ties keep (i, j) order
+    comps = _DisjointSets(n)
+    adj = [[] for _ in range(n)]
+    power = [0] * n
+    for _, i, j in edges:
+        c1, c2 = comps.find(i), comps.find(j)
+        if c1 != c2:
+            comps.merge(c1, c2)
+            adj[i].append(j)
+            adj[j].append(i)
+            power[i] += 1
+            power[j] += 1
+    leafs = [i for i in range(n) if power[i] == 1]
+    max_dists = [0] * n
+    for leaf in leafs:
+        dist = [0] * n
+        for frm, to in _bfs_edges(adj, leaf):
+            dist[to] = dist[frm] + 1
+        max_dists = [max(m, d) for m, d in zip(max_dists, dist)]
+    best = min(max_dists)
+    return adj, [i for i in range(n) if max_dists[i] == best]
+
+
+def _bfs_edges(adj, start: int):
+    """Tree edges ``(from, to)`` in ``Graph::walkBreadthFirst`` order."""
+    seen = [False] * len(adj)
+    seen[start] = True
+    queue, k = [start], 0
+    while k < len(queue):
+        v = queue[k]
+        k += 1
+        for w in adj[v]:
+            if not seen[w]:
+                seen[w] = True
+                queue.append(w)
+                yield v, w
+
+
+def _chain(pairs: dict, n: int, shipped: bool):
+    """``AffineBasedEstimator``: cameras ``R_k`` (3x3, reference image -> image k) chained
+    breadth-first over the maximum spanning tree from its first centre.
+
+    Returns (cameras, centre, tree edges (from, to) in chaining order), local indices."""
+    adj, centres = _max_spanning_tree(pairs, n)
+    centre = centres[0]
+    cams = [np.eye(3) for _ in range(n)]
+    tree = []
+    for frm, to in _bfs_edges(adj, centre):
+        h = pairs[frm, to].H
+        # shipped (CalcAffineTransform): R_to = R_from H; corrected: R_to = H R_from
+        cams[to] = cams[frm] @ h if shipped else h @ cams[frm]
+        tree.append((frm, to))
+    return cams, centre, tree
+
+
+def _sim_params(m: np.ndarray) -> np.ndarray:
+    return np.array([m[0, 0], m[1, 0], m[0, 2], m[1, 2]])
+
+
+def _sim_matrix(p) -> np.ndarray:
+    return np.array([[p[0], -p[1], p[2]], [p[1], p[0], p[3]], [0.0, 0.0, 1.0]])
+
+
+def _bundle_adjust(cams, feats, pairs, conf_thresh: float, shipped: bool):
+    """``BundleAdjusterAffinePartial``: refine the four similarity parameters of every map on the
+    inlier matches of the pairs whose confidence exceeds ``conf_thresh``.
+
+    With cameras ``R_k`` mapping the reference frame into image k, a match ``(p_i, p_j)``
+    predicts ``p_j = R_j R_i^-1 p_i``; OpenCV predicts ``R_i^-1 R_j p_i`` (``shipped``)."""
+    n = len(cams)
+    obs = []
+    for i in range(n - 1):
+        for j in range(i + 1, n):
+            p = pairs[i, j]
+            if p.confidence > conf_thresh and p.num_inliers:
+                m = p.matches[p.inliers]
+                obs.append((i, j, feats[i].points[m[:, 0]].astype(float),
+                            feats[j].points[m[:, 1]].astype(float)))
+    if not obs:
+        return cams
+
+    def residuals(x):
+        out = []
+        for i, j, pi, pj in obs:
+            hi, hj = _sim_matrix(x[4 * i:4 * i + 4]), _sim_matrix(x[4 * j:4 * j + 4])
+            h = np.linalg.inv(hi) @ hj if shipped else hj @ np.linalg.inv(hi)
+            pred = pi @ h[:2, :2].T + h[:2, 2]
+            out.append((pj - pred).ravel())
+        return np.concatenate(out)
+
+    x0 = np.concatenate([_sim_params(c) for c in cams])
+    if residuals(x0).size < x0.size:   # too few equations for Levenberg-Marquardt
+        return cams
+    sol = least_squares(residuals, x0, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=1000 * x0.size)
+    if not np.all(np.isfinite(sol.x)):
+        return cams
+    return [_sim_matrix(sol.x[4 * k:4 * k + 4]) for k in range(n)]
+
+
+@dataclass(frozen=True)
+class MapsEstimate:
+    """Result of :func:`estimate_maps`.
+
+    Attributes
+    ----------
+    transforms : tuple of (Transform2D or None)
+        Per input map, the transform from its frame into the reference map's frame (m, rad);
+        None for a map left out (not in the largest confidently matched component).
+    confidences : tuple of float
+        Per input map, the best pair confidence it has with another kept map (0 when left out;
+        the reference gets its own best).
+    pair_confidence : (n, n) ndarray
+        Every pair's confidence ``inliers / (8 + 0.3 matches)`` (symmetric, 0 on the diagonal).
+    component : tuple of int
+        Indices of the maps kept (``leaveBiggestComponent``).
+    centre : int or None
+        Index of the spanning tree's centre (the node's reference), None with fewer than two
+        kept maps.
+    tree : tuple of (int, int)
+        Spanning-tree edges ``(parent, child)`` in the order they were chained.
+    scales : tuple of float or None
+        Per map, the scale of its similarity into the reference (1 for a perfect estimate).
+    chaining : str
+        ``"corrected"`` or ``"shipped"``.
+    reference : int
+        Index of the map whose frame the transforms are in.
+    seconds : float
+        Wall-clock time (s).
+    """
+
+    transforms: tuple
+    confidences: tuple
+    pair_confidence: np.ndarray
+    component: tuple
+    centre: int | None
+    tree: tuple
+    scales: tuple
+    chaining: str
+    reference: int
+    seconds: float
+    diagnostics: dict = field(default_factory=dict)
+
+
+def estimate_maps(grids, *, confidence: float = 1.0, chaining: str = "corrected", reference: int = 0,
+                  seed: int = 0, **options) -> MapsEstimate:
+    """Place N maps in one frame as ``multirobot_map_merge`` does.
+
+    The pairwise motions are chained over a maximum spanning tree from its centre. With
+    cameras ``R_k`` that map the reference (centre) image into image k (the node warps image k
+    by ``R_k^-1``) and pair motions ``H_ij`` that map image i into image j, the child of an edge
+    ``(i, j)`` must get ``R_j = H_ij R_i``; OpenCV's ``CalcAffineTransform`` computes
+    ``R_j = R_i H_ij``. The two agree next to the centre (``R_i = I``) and whenever the motions
+    commute (pure translations), so two maps always merge right, but a map two or more edges from
+    the centre is misplaced once rotations are involved. The bundle adjustment uses the same
+    order (``R_i^-1 R_j``), so the misplaced chain is a fixed point of it and it does not repair
+    the error. (m-explore issue #70 reports improper merging of robots that start with different
+    orientations; that report carries no diagnosis.)
+
+    Parameters
+    ----------
+    grids : sequence of OccupancyGrid
+        Two or more maps; each is resampled to the first one's resolution if needed.
+    confidence : float
+        Least pair confidence for a pair to join maps (the node's ``estimation_confidence``).
+    chaining : {"corrected", "shipped"}
+        Composition order along the spanning tree and in the bundle adjustment.
+    reference : int
+        Index of the map whose frame the transforms are returned in. If it is not in the kept
+        component, every other map is reported left out.
+    seed : int
+        Unused: the method is deterministic.
+    **options
+        Other fields of :class:`MapMergeOptions` (``bundle_adjust``, RANSAC settings, ...).
+
+    Returns
+    -------
+    MapsEstimate
+    """
+    clock = Stopwatch()
+    if chaining not in ("corrected", "shipped"):
+        raise InputError(f"chaining must be 'corrected' or 'shipped', got {chaining!r}")
+    grids = list(grids)
+    if len(grids) < 2:
+        raise InputError(f"estimate_maps needs at least two maps, got {len(grids)}")
+    if not 0 <= reference < len(grids):
+        raise InputError(f"reference must be an index into the {len(grids)} maps, got {reference}")
+    opts = make_options(MapMergeOptions, dict(options, confidence=confidence), METHOD)
+    first = prepare_pair(grids[0], grids[0])[0]
+    prepared = [first] + [prepare_pair(first, g)[1] for g in grids[1:]]
+    n = len(prepared)
+    feats = [_features(g) for g in prepared]
+
+    # pairwise matrix: H of (i, j) maps image i into image j
+    pairs = {}
+    for i in range(n):
+        pairs[i, i] = _Pair()
+        for j in range(i + 1, n):
+            if len(feats[i].points) and len(feats[j].points):
+                pairs[i, j] = _pair_motion(feats[i], feats[j], opts)
+            else:
+                pairs[i, j] = _Pair()
+            pairs[j, i] = pairs[i, j].reversed()
+    conf = np.array([[pairs[i, j].confidence for j in range(n)] for i in range(n)])
+
+    keep = _biggest_component(conf, opts.confidence)
+    none = tuple([None] * n)
+    base = dict(pair_confidence=conf, chaining=chaining, reference=reference,
+                diagnostics={"keypoints": tuple(len(f.points) for f in feats),
+                             "matches": {(i, j): len(pairs[i, j].matches) for i in range(n) for j in range(i + 1, n)},
+                             "inliers": {(i, j): pairs[i, j].num_inliers for i in range(n) for j in range(i + 1, n)}})
+    if len(keep) < 2:
+        # the node puts the first non-empty map at the identity and leaves the rest out
+        ref_only = tuple(Transform2D.identity() if k == reference else None for k in range(n))
+        return MapsEstimate(ref_only, tuple(0.0 for _ in range(n)), component=tuple(keep), centre=None,
+                            tree=(), scales=tuple(1.0 if k == reference else None for k in range(n)),
+                            seconds=clock(), **base)
+
+    m = len(keep)
+    sub = {(a, b): pairs[keep[a], keep[b]] for a in range(m) for b in range(m)}
+    shipped = chaining == "shipped"
+    cams, centre, tree_local = _chain(sub, m, shipped)
+    tree = [(keep[a], keep[b]) for a, b in tree_local]
+    if opts.bundle_adjust:
+        cams = _bundle_adjust(cams, [feats[k] for k in keep], sub, opts.confidence, shipped)
+        inv_c = np.linalg.inv(cams[centre])
+        cams = [inv_c @ c if shipped else c @ inv_c for c in cams]
+
+    if reference not in keep:
+        transforms = tuple(Transform2D.identity() if k == reference else None for k in range(n))
+        scales = tuple(1.0 if k == reference else None for k in range(n))
+    else:
+        r_ref = cams[keep.index(reference)]
+        transforms, scales = [None] * n, [None] * n
+        for a, k in enumerate(keep):
+            sim = r_ref @ np.linalg.inv(cams[a])      # image k -> reference image (pixels)
+            pts = feats[k].points
+            anchor = (pts.astype(float).mean(axis=0) + 0.5) if len(pts) else \
+                np.array([prepared[k].cols / 2.0, prepared[k].rows / 2.0])
+            cell_t, s = _rigid_cells(sim, anchor)
+            transforms[k] = cell_to_map(prepared[reference], prepared[k], cell_t)
+            scales[k] = s
+        transforms[reference] = Transform2D.identity()
+        transforms, scales = tuple(transforms), tuple(scales)
+    confs = tuple(float(max((conf[k, j] for j in keep if j != k), default=0.0)) if k in keep else 0.0
+                  for k in range(n))
+    return MapsEstimate(transforms, confs, component=tuple(keep), centre=keep[centre], tree=tuple(tree),
+                        scales=scales, seconds=clock(), **base)

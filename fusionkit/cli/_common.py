@@ -1,0 +1,118 @@
+"""Helpers shared by the subcommands: progress bars, argument types."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+
+class Progress:
+    """A one-line progress bar on stderr, drawn only when stderr is a terminal.
+
+    Call it as ``progress(done, total, label)``; it redraws at most 10 times a second.
+    """
+
+    def __init__(self, title: str, stream=None, enabled: bool | None = None):
+        self.title = title
+        self.stream = stream or sys.stderr
+        self.enabled = self.stream.isatty() if enabled is None else enabled
+        self._last = 0.0
+        self._t0 = time.perf_counter()
+        self._drawn = False
+
+    def __call__(self, done: int, total: int, label: str = "") -> None:
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if done < total and now - self._last < 0.1:
+            return
+        self._last = now
+        frac = 0.0 if total <= 0 else min(1.0, done / total)
+        width = 28
+        bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
+        text = f"\r{self.title} [{bar}] {100 * frac:5.1f}% {label}"[:120]
+        self.stream.write(text.ljust(100))
+        self.stream.flush()
+        self._drawn = True
+
+    def close(self) -> None:
+        if self.enabled and self._drawn:
+            self.stream.write(f"\r{self.title}: done in {time.perf_counter() - self._t0:.1f} s".ljust(100) + "\n")
+            self.stream.flush()
+
+
+def int_range(lo: int, hi: int):
+    """argparse type: an integer in ``[lo, hi]``."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"must be between {lo} and {hi}, got {v}")
+        return v
+    return parse
+
+
+def float_range(lo: float, hi: float, *, lo_open: bool = False):
+    """argparse type: a float in ``[lo, hi]`` (or ``(lo, hi]`` with ``lo_open``)."""
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not (v > lo if lo_open else v >= lo) or not v <= hi:
+            raise argparse.ArgumentTypeError(
+                f"must be {'>' if lo_open else '>='} {lo:g} and <= {hi:g}, got {v:g}")
+        return v
+    return parse
+
+
+def add_merge_options(p) -> None:
+    """The method's settings, shared by ``merge``, ``run`` and ``bench``."""
+    from ..pipeline import METHODS, MergeConfig
+    d = MergeConfig()
+    g = p.add_argument_group("method settings")
+    g.add_argument("--method", choices=METHODS, default=d.method,
+                   help=f"merging method (default {d.method}: the paper's DFT + Pearson + PSO)")
+    g.add_argument("--seed", type=int, default=d.seed, help=f"seed of every random step (default {d.seed})")
+    g.add_argument("--theta", type=float_range(-1, 1), default=d.theta,
+                   help=f"Pearson rho above which two unique poses agree (eq. 2; default {d.theta})")
+    g.add_argument("--unique-count", type=int_range(1, 100000), default=d.unique_count,
+                   help=f"unique poses per robot; delta is set to give this many "
+                        f"(Algorithm 1; default {d.unique_count})")
+    g.add_argument("--delta", type=float, default=None,
+                   help="fixed divergence threshold of Algorithm 1 (spectrum units: m x beams); "
+                        "overrides --unique-count")
+    g.add_argument("--sub-sec", type=int_range(1, 1000), default=d.sub_sec,
+                   help=f"half-width of Algorithm 1's sections in poses (default {d.sub_sec})")
+    g.add_argument("--particles", type=int_range(1, 10000), default=d.pso.particles,
+                   help=f"PSO swarm size (default {d.pso.particles})")
+    g.add_argument("--iterations", type=int_range(0, 100000), default=d.pso.iterations,
+                   help=f"PSO iterations (default {d.pso.iterations})")
+    g.add_argument("--w", type=float_range(0, 10), default=d.pso.w, help=f"PSO inertia weight (default {d.pso.w})")
+    g.add_argument("--c1", type=float_range(0, 10), default=d.pso.c1,
+                   help=f"PSO cognitive coefficient (default {d.pso.c1})")
+    g.add_argument("--c2", type=float_range(0, 10), default=d.pso.c2,
+                   help=f"PSO social coefficient (default {d.pso.c2})")
+    g.add_argument("--accept", type=float_range(0, 1), default=d.accept,
+                   help=f"least fraction of a map's walls that must fall on the fused map's walls for "
+                        f"it to be merged (default {d.accept})")
+    g.add_argument("--no-seeding", action="store_true",
+                   help="start the swarm at random only (the paper's blind search) instead of also "
+                        "at the transforms given by matched scans")
+
+
+def merge_config_from_args(args, *, reference: int = 0):
+    """A MergeConfig from the options of :func:`add_merge_options`."""
+    from dataclasses import replace
+    from ..pipeline import MergeConfig
+    cfg = MergeConfig(method=args.method, theta=args.theta, unique_count=args.unique_count,
+                      delta=args.delta, sub_sec=args.sub_sec, accept=args.accept,
+                      reference=reference, seed=args.seed)
+    cfg = cfg.with_pso(particles=args.particles, iterations=args.iterations, w=args.w,
+                       c1=args.c1, c2=args.c2)
+    if args.no_seeding:
+        cfg = replace(cfg, alignment=replace(cfg.alignment, seeded=False))
+    return cfg

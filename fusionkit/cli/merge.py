@@ -1,0 +1,92 @@
+"""``fusionkit merge``: fuse robot maps into one (CONTRACTS section 6)."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+from .._atomic import check_not_input, write_text_atomic
+from ..errors import InputError
+from ._common import Progress, add_merge_options, merge_config_from_args
+
+EXIT_ALL_MERGED = 0
+EXIT_SOME_LEFT_OUT = 3
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "merge", help="fuse several robots' maps into the first map's frame",
+        description="Find the rigid transform of each map into the reference map's frame and fuse "
+                    "them (ROS map_server YAML in, YAML + PGM out). A NAME.scans.npz beside a map is "
+                    "used when present; otherwise virtual scans are cast in the map's free space. "
+                    "Exit status: 0 all maps merged, 3 some left out (not confidently placed), "
+                    "2 bad input.")
+    p.add_argument("maps", nargs="+", metavar="MAP.yaml", help="robot maps (two or more)")
+    p.add_argument("-o", "--output", required=True, metavar="MERGED.yaml",
+                   help="where to write the fused map (YAML + PGM beside it)")
+    p.add_argument("--report", metavar="REPORT.json",
+                   help="merge report (JSON); default: MERGED.report.json beside the output")
+    p.add_argument("--reference", metavar="MAP.yaml",
+                   help="the map whose frame is the merged frame (default: the first map)")
+    add_merge_options(p)
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..mapio import save_map
+    from ..pipeline import MergeResult, merge
+
+    out = Path(args.output)
+    if out.suffix not in (".yaml", ".yml"):
+        raise InputError(f"{out}: the output must be a map YAML path ending in .yaml")
+    report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
+    image_path = out.with_suffix(".pgm")
+    if len(args.maps) < 2:
+        raise InputError("give at least two maps to merge")
+    inputs = list(args.maps)
+    check_not_input([out, report_path, image_path],
+                    inputs + [Path(m).with_suffix(".pgm") for m in inputs]
+                    + [Path(m).with_name(Path(m).stem + ".scans.npz") for m in inputs])
+    reference = 0
+    if args.reference is not None:
+        if args.reference not in inputs:
+            raise InputError(f"--reference {args.reference} is not one of the maps given")
+        reference = inputs.index(args.reference)
+    config = merge_config_from_args(args, reference=reference)
+    progress = Progress("merging", enabled=None if not args.quiet else False)
+
+    def callback(ev):
+        if ev.stage == "align" and ev.pso is not None:
+            progress(ev.step, ev.total, f"{ev.label} it {ev.pso.iteration}")
+        elif ev.stage != "align":
+            progress(0, 1, ev.stage)
+
+    result: MergeResult = merge(inputs, config=config, callback=callback)
+    progress.close()
+    save_map(result.grid, out, inputs=inputs)
+    report = result.report(inputs, output=str(args.output))
+    write_text_atomic(report_path, json.dumps(report, indent=2) + "\n")
+    if not args.quiet:
+        print(format_placements(result, inputs))
+        print(f"fused map: {out} ({result.grid.cols}x{result.grid.rows} cells); report: {report_path}")
+    return EXIT_ALL_MERGED if result.all_merged else EXIT_SOME_LEFT_OUT
+
+
+def format_placements(result, names) -> str:
+    """A table of each map's placement, for the terminal."""
+    lines = [f"{'map':<28} {'merged':<7} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'theta (deg)':>11}"]
+    for p in result.placements:
+        name = str(names[p.index])[-28:]
+        if p.transform is None:
+            lines.append(f"{name:<28} {'no':<7} {p.confidence:5.2f} {'-':>8} {'-':>8} {'-':>11}  {p.reason}")
+        else:
+            t = p.transform
+            lines.append(f"{name:<28} {'yes':<7} {p.confidence:5.2f} {t.x:8.2f} {t.y:8.2f} "
+                         f"{math.degrees(t.theta):11.1f}")
+    order = " , ".join(f"{names[a]} + {names[b]}" for a, b in result.fusion_order) or "(none)"
+    lines.append(f"fusion order: {order}")
+    lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items()))
+    return "\n".join(lines)

@@ -1,0 +1,161 @@
+"""What the consensus method precomputes once per map: masks, the distance field of its walls,
+its wall points and its scans' spectra.
+
+Everything here is in the map's own frame: points in metres, rasters indexed ``[row, col]``
+with row 0 the lowest ``y`` (CONTRACTS 1).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from ..grid import OccupancyGrid
+from ..scanlog import ScanLog
+from ..unique_poses import scan_spectra
+
+__all__ = ["MapIndex", "index_map", "spread_indices"]
+
+
+@dataclass(frozen=True, eq=False)
+class MapIndex:
+    """One map, prepared for matching, refinement and verification.
+
+    Attributes
+    ----------
+    grid : OccupancyGrid
+        The map reduced to its three states.
+    known, occupied : (rows, cols) bool
+        Known and occupied cells.
+    near : (rows, cols) bool
+        Cells within one cell (8-neighbourhood) of an occupied cell.
+    clear : (rows, cols) bool
+        Free cells at least ``clear_cells`` cells from every occupied cell: a wall of another
+        map drawn there contradicts this map.
+    dist : (rows, cols) float32
+        Distance (cells) of each cell to the nearest occupied cell.
+    nearest : (2, rows, cols) int32
+        ``(row, col)`` of that nearest occupied cell.
+    points : (K, 2) float64
+        Centres (m) of the occupied cells, in the map frame.
+    refine_points : (L, 2) float64
+        An even subset of ``points`` (at most ``max_refine_points``) used by the refiners.
+    log : ScanLog
+        The scans (recorded or virtual).
+    virtual : bool
+        Whether ``log`` was cast in the map rather than recorded.
+    pose_index : (P,) int
+        The scans used for matching: spread over the map (one per ``pose_spacing`` cell).
+    spectra : (P, F) float32
+        Their ``|DFT|`` spectra without DC (eq. 1), centred and scaled to unit norm, so that a dot
+        product is Pearson's rho (eq. 2).
+    ranges_fft : (P, B // 2 + 1) complex64
+        FFT of their centred, clipped ranges over beam angle (for the relative heading).
+    """
+
+    grid: OccupancyGrid
+    known: np.ndarray
+    occupied: np.ndarray
+    near: np.ndarray
+    clear: np.ndarray
+    dist: np.ndarray
+    nearest: np.ndarray
+    points: np.ndarray
+    refine_points: np.ndarray
+    log: ScanLog
+    virtual: bool
+    pose_index: np.ndarray
+    spectra: np.ndarray
+    ranges_fft: np.ndarray
+
+    @property
+    def resolution(self) -> float:
+        return self.grid.resolution
+
+    def cells(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Integer ``(rows, cols)`` of map-frame ``points`` and the mask of those on the grid."""
+        rr, cc = self.grid.world_to_cell(points)
+        ri = np.floor(rr).astype(np.int64)
+        ci = np.floor(cc).astype(np.int64)
+        inside = (ri >= 0) & (ri < self.grid.rows) & (ci >= 0) & (ci < self.grid.cols)
+        return ri, ci, inside
+
+
+def spread_indices(poses: np.ndarray, spacing: float, limit: int) -> np.ndarray:
+    """Indices of at most ``limit`` poses, one per ``spacing`` x ``spacing`` m cell of the
+    plane (the first pose in each), then thinned evenly if still too many; ascending."""
+    if len(poses) == 0:
+        return np.zeros(0, np.int64)
+    key = np.floor(poses[:, :2] / spacing).astype(np.int64)
+    _, first = np.unique(key, axis=0, return_index=True)
+    idx = np.sort(first)
+    if idx.size > limit:
+        idx = idx[np.linspace(0, idx.size - 1, limit).round().astype(np.int64)]
+    return idx
+
+
+def index_map(grid: OccupancyGrid, log: ScanLog, *, virtual: bool, pose_spacing: float,
+              max_poses: int, max_refine_points: int, clear_cells: int = 3) -> MapIndex:
+    """Precompute a :class:`MapIndex` for ``grid`` and its scans ``log``.
+
+    Parameters
+    ----------
+    grid : OccupancyGrid
+    log : ScanLog
+        The map's scans, in its frame.
+    virtual : bool
+        Whether the scans are virtual.
+    pose_spacing : float
+        Scans used for matching are thinned to one per square of this side (m).
+    max_poses : int
+        At most this many scans are used for matching.
+    max_refine_points : int
+        At most this many wall points are used by the refiners.
+    clear_cells : int
+        Least distance (cells) from a wall for a free cell to count as clear.
+    """
+    tri = grid.with_data(grid.trinary())
+    occupied = tri.occupied_mask()
+    known = tri.known_mask()
+    free = known & ~occupied
+    if occupied.any():
+        dist, nearest = ndimage.distance_transform_edt(~occupied, return_indices=True)
+        dist = dist.astype(np.float32)
+        nearest = nearest.astype(np.int32)
+    else:
+        dist = np.full(occupied.shape, np.inf, np.float32)
+        nearest = np.zeros((2,) + occupied.shape, np.int32)
+    near = dist <= 1.5
+    clear = free & (dist >= clear_cells)
+    r, c = np.nonzero(occupied)
+    points = tri.cell_to_world(r, c)
+    if len(points) > max_refine_points:
+        step = len(points) / max_refine_points
+        refine = points[(np.arange(max_refine_points) * step).astype(np.int64)]
+    else:
+        refine = points
+    idx = spread_indices(log.poses, pose_spacing, max_poses)
+    ranges = log.clipped_ranges()[idx].astype(np.float64)
+    spec = scan_spectra(ranges, dc=False)                      # eq. 1 without the DC bin
+    spec = spec - spec.mean(axis=1, keepdims=True)
+    norm = np.sqrt((spec * spec).sum(axis=1, keepdims=True))
+    norm[norm == 0] = np.inf
+    spec = (spec / norm).astype(np.float32)                     # dot product = Pearson (eq. 2)
+    centred = ranges - ranges.mean(axis=1, keepdims=True)
+    rfft = np.fft.rfft(centred, axis=1).astype(np.complex64)
+    return MapIndex(tri, known, occupied, near, clear, dist, nearest, points,
+                    np.ascontiguousarray(refine), log, bool(virtual), idx, spec, rfft)
+
+
+def wall_count_within(index: MapIndex, points: np.ndarray) -> int:
+    """How many ``points`` (m, map frame) land on known cells of the map."""
+    ri, ci, inside = index.cells(points)
+    return int(index.known[ri[inside], ci[inside]].sum())
+
+
+def heading_of(angle: float) -> float:
+    """``angle`` wrapped to ``[-pi, pi)``."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi

@@ -1,0 +1,168 @@
+"""Hypotheses from the grids alone: rotations from wall directions, translations by correlation.
+
+Rotation
+--------
+The walls' directions are histogrammed (gradient orientation of the blurred wall raster,
+weighted by the gradient's magnitude, over ``[0, pi)``). Turning map B by ``theta`` shifts its
+histogram by ``theta``, so the circular cross-correlation of the two histograms peaks at the
+rotation (modulo ``pi``: a wall has no front side); each peak gives two candidates,
+``theta`` and ``theta + pi``.
+
+Translation
+-----------
+For a candidate rotation, B's wall cells are turned and rasterised; every translation is then
+scored at once by FFT correlation against A's *evidence raster*: ``+1`` near A's walls
+(softened by a Gaussian), ``-penalty`` on A's clear free space, ``0`` on unknown cells. The best
+peaks, kept apart by a suppression radius, are the translation candidates.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import fft as sfft
+from scipy import ndimage
+
+from ..transform import Transform2D
+from ._index import MapIndex
+
+__all__ = ["orientation_histogram", "rotation_candidates", "EvidenceRaster", "evidence_raster",
+           "translation_candidates"]
+
+
+def orientation_histogram(index: MapIndex, bins: int = 180) -> np.ndarray:
+    """Histogram (``bins`` over ``[0, pi)``, circularly smoothed, unit sum) of wall directions."""
+    occ = ndimage.gaussian_filter(index.occupied.astype(np.float32), 1.0)
+    gy = ndimage.sobel(occ, axis=0)
+    gx = ndimage.sobel(occ, axis=1)
+    mag = np.hypot(gx, gy)
+    sel = mag > 0.05 * max(float(mag.max()), 1e-12)
+    ang = np.mod(np.arctan2(gy[sel], gx[sel]) + index.grid.origin[2], math.pi)
+    h, _ = np.histogram(ang, bins=bins, range=(0.0, math.pi), weights=mag[sel])
+    h = ndimage.gaussian_filter1d(h.astype(np.float64), 1.0, mode="wrap")
+    s = h.sum()
+    return h / s if s > 0 else h
+
+
+def _local_maxima(c: np.ndarray, count: int, min_sep: int) -> list[int]:
+    """Indices of the ``count`` largest circular local maxima of ``c``, ``min_sep`` bins apart."""
+    n = c.size
+    is_max = (c >= np.roll(c, 1)) & (c >= np.roll(c, -1))
+    cand = np.nonzero(is_max)[0]
+    cand = cand[np.argsort(-c[cand], kind="stable")]
+    out: list[int] = []
+    for i in cand:
+        if all(min(abs(int(i) - j), n - abs(int(i) - j)) >= min_sep for j in out):
+            out.append(int(i))
+        if len(out) >= count:
+            break
+    return out
+
+
+def rotation_candidates(hist_a: np.ndarray, hist_b: np.ndarray, count: int = 3) -> list[float]:
+    """Candidate rotations B -> A (rad) from the histograms' circular cross-correlation:
+    the ``count`` best peaks, each in both branches (``theta`` and ``theta + pi``)."""
+    n = hist_a.size
+    # c[k] = sum_phi H_A(phi) H_B(phi - k): B's walls turned by k bins lie on A's
+    c = np.fft.irfft(np.fft.rfft(hist_a) * np.conj(np.fft.rfft(hist_b)), n=n)
+    out = []
+    for k in _local_maxima(c, count, max(2, n // 36)):
+        th = k * math.pi / n
+        out += [th, th + math.pi]
+    return [math.atan2(math.sin(t), math.cos(t)) for t in out]
+
+
+class EvidenceRaster:
+    """Map A's evidence at a coarse cell size, with its FFT ready for correlations.
+
+    ``values[row, col]``: near walls up to 1, clear free space ``-penalty``, else 0; ``factor``
+    fine cells per coarse cell; coordinates are A's cell frame divided by ``factor``.
+    """
+
+    def __init__(self, values: np.ndarray, factor: int, index: MapIndex):
+        self.values = values
+        self.factor = factor
+        self.index = index
+        self.cell = index.resolution * factor
+
+
+def _pool(mask: np.ndarray, f: int, how: str) -> np.ndarray:
+    if f == 1:
+        return mask
+    r, c = mask.shape
+    rr, cc = -(-r // f) * f, -(-c // f) * f
+    pad = np.zeros((rr, cc), mask.dtype)
+    pad[:r, :c] = mask
+    blocks = pad.reshape(rr // f, f, cc // f, f)
+    return blocks.any(axis=(1, 3)) if how == "any" else blocks.all(axis=(1, 3))
+
+
+def evidence_raster(index: MapIndex, *, coarse: float = 0.1, penalty: float = 1.0,
+                    sigma: float = 1.0) -> EvidenceRaster:
+    """Build A's evidence raster at about ``coarse`` m per cell (a whole number of A's cells)."""
+    f = max(1, int(round(coarse / index.resolution)))
+    walls = _pool(index.occupied, f, "any").astype(np.float32)
+    if sigma > 0:
+        walls = ndimage.gaussian_filter(walls, sigma)
+        walls /= max(float(walls.max()), 1e-12)
+    clear = _pool(index.clear, f, "all")
+    values = walls - penalty * clear.astype(np.float32) * (walls < 0.05)
+    return EvidenceRaster(np.ascontiguousarray(values, np.float32), f, index)
+
+
+def translation_candidates(ev: EvidenceRaster, points_b: np.ndarray, theta: float, *,
+                           count: int = 3, suppress: float = 1.0) -> list[tuple[Transform2D, float]]:
+    """Best translations for B's wall points (m, B's frame) turned by ``theta``.
+
+    Returns up to ``count`` ``(transform B -> A, correlation score)`` pairs, best first, at least
+    ``suppress`` m apart. The score is the summed evidence under B's turned walls (one count per
+    coarse cell).
+    """
+    a = ev.index
+    rot = Transform2D(0.0, 0.0, theta)
+    q0 = a.grid.origin_transform.inverse(rot(points_b)) / ev.cell      # coarse A-cell coords
+    cells = np.unique(np.floor(q0).astype(np.int64), axis=0)
+    if len(cells) == 0:
+        return []
+    lo = cells.min(axis=0)
+    span = cells.max(axis=0) - lo + 1
+    hb, wb = int(span[1]), int(span[0])
+    ha, wa = ev.values.shape
+    shape = (ha + hb, wa + wb)
+    img = np.zeros((hb, wb), np.float32)
+    img[cells[:, 1] - lo[1], cells[:, 0] - lo[0]] = 1.0
+    fa = sfft.rfft2(ev.values, s=shape, workers=1)
+    fb = sfft.rfft2(img, s=shape, workers=1)
+    corr = sfft.irfft2(fa * np.conj(fb), s=shape, workers=1)
+    # corr[dr, dc] = sum_{r, c} A[r + dr, c + dc] B[r, c] (indices modulo the padded shape):
+    # B's cell (r, c) lands on A's (r + dr, c + dc)
+    rad = max(1, int(round(suppress / ev.cell)))
+    peaks = ndimage.maximum_filter(corr, size=2 * rad + 1, mode="wrap")
+    cand = np.nonzero((corr == peaks) & (corr > 0))
+    if cand[0].size == 0:
+        return []
+    vals = corr[cand]
+    order = np.argsort(-vals, kind="stable")[: count * 4]
+    out = []
+    taken: list[tuple[int, int]] = []
+    ha_p, wa_p = shape
+    for k in order:
+        dr, dc = int(cand[0][k]), int(cand[1][k])
+        if dr >= ha:
+            dr -= ha_p
+        if dc >= wa:
+            dc -= wa_p
+        if any(abs(dr - r) <= rad and abs(dc - c) <= rad for r, c in taken):
+            continue
+        taken.append((dr, dc))
+        # B's raster cell (r, c) holds coarse A-cell coordinates (c + lo_x, r + lo_y) and lands on
+        # A's cell (r + dr, c + dc): in A's cell frame the shift is (dc - lo_x, dr - lo_y) cells
+        d = np.array([dc - lo[0], dr - lo[1]], float) * ev.cell
+        psi = a.grid.origin[2]
+        t = np.array([math.cos(psi) * d[0] - math.sin(psi) * d[1],
+                      math.sin(psi) * d[0] + math.cos(psi) * d[1]])
+        out.append((Transform2D(float(t[0]), float(t[1]), theta), float(vals[k])))
+        if len(out) >= count:
+            break
+    return out

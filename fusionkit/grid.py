@@ -1,0 +1,134 @@
+"""The occupancy grid value type (CONTRACTS section 1).
+
+``data[row, col]`` is ``numpy.int8``: ``-1`` unknown, ``0`` free, ``100`` occupied. Row 0 is
+the row nearest the origin (lowest y). ``origin = (x, y, yaw)`` is the pose of the lower-left
+corner of cell (0, 0) in the map frame; ``resolution`` is metres per cell. The centre of cell
+``(r, c)`` is ``origin_xy + R(yaw) @ ((c + 0.5) * res, (r + 0.5) * res)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .transform import Transform2D
+
+__all__ = ["OccupancyGrid", "UNKNOWN", "FREE", "OCCUPIED"]
+
+UNKNOWN = -1
+FREE = 0
+OCCUPIED = 100
+
+
+@dataclass(frozen=True, eq=False)
+class OccupancyGrid:
+    """A 2-D occupancy grid in the ``nav_msgs/OccupancyGrid`` convention.
+
+    Parameters
+    ----------
+    data : (rows, cols) int8 array
+        ``-1`` unknown, ``0`` free, ``100`` occupied (1..99 allowed as probabilities).
+    resolution : float
+        Metres per cell, > 0.
+    origin : (x, y, yaw)
+        Pose of the lower-left corner of cell (0, 0) in the map frame (m, m, rad).
+    """
+
+    data: np.ndarray
+    resolution: float
+    origin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    name: str = field(default="", compare=False)
+
+    def __post_init__(self):
+        data = np.ascontiguousarray(self.data, dtype=np.int8)
+        if data.ndim != 2:
+            raise ValueError(f"grid data must be 2-D (rows, cols), got shape {data.shape}")
+        res = float(self.resolution)
+        if not (res > 0 and math.isfinite(res)):
+            raise ValueError(f"grid resolution must be a positive number of metres, got {self.resolution}")
+        origin = tuple(float(v) for v in self.origin)
+        if len(origin) == 2:
+            origin = (*origin, 0.0)
+        if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
+            raise ValueError(f"grid origin must be finite (x, y, yaw), got {self.origin}")
+        data.setflags(write=False)
+        object.__setattr__(self, "data", data)
+        object.__setattr__(self, "resolution", res)
+        object.__setattr__(self, "origin", origin)
+
+    # -- basic facts ---------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.data.shape
+
+    @property
+    def rows(self) -> int:
+        return self.data.shape[0]
+
+    @property
+    def cols(self) -> int:
+        return self.data.shape[1]
+
+    @property
+    def origin_transform(self) -> Transform2D:
+        """Transform from the grid's cell frame (metres, lower-left corner) into the map frame."""
+        return Transform2D(*self.origin)
+
+    def trinary(self) -> np.ndarray:
+        """The three states as int8: probabilities >= 50 become occupied, 1..49 free."""
+        d = self.data
+        out = np.full(d.shape, UNKNOWN, np.int8)
+        out[(d >= 0) & (d < 50)] = FREE
+        out[d >= 50] = OCCUPIED
+        return out
+
+    def known_mask(self) -> np.ndarray:
+        return self.data >= 0
+
+    def occupied_mask(self) -> np.ndarray:
+        return self.data >= 50
+
+    def free_mask(self) -> np.ndarray:
+        return (self.data >= 0) & (self.data < 50)
+
+    def counts(self) -> dict:
+        """Cell counts ``{"occupied", "free", "unknown"}`` of the three states."""
+        occ = int(self.occupied_mask().sum())
+        free = int(self.free_mask().sum())
+        return {"occupied": occ, "free": free, "unknown": int(self.data.size - occ - free)}
+
+    def with_data(self, data, name: str | None = None) -> "OccupancyGrid":
+        """Same geometry, new cells."""
+        return OccupancyGrid(data, self.resolution, self.origin, self.name if name is None else name)
+
+    # -- coordinates ----------------------------------------------------------------------------
+    def cell_to_world(self, rows, cols) -> np.ndarray:
+        """Centres of cells ``(rows, cols)`` in the map frame, shape ``(..., 2)`` (m)."""
+        r = np.asarray(rows, dtype=float)
+        c = np.asarray(cols, dtype=float)
+        local = np.stack([(c + 0.5) * self.resolution, (r + 0.5) * self.resolution], axis=-1)
+        return self.origin_transform(local)
+
+    def world_to_cell(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """Continuous cell coordinates ``(row, col)`` of map-frame points (cell (r, c) spans
+        ``[r, r+1) x [c, c+1)``); ``floor`` gives the cell index."""
+        local = self.origin_transform.inverse(np.asarray(points, dtype=float))
+        return local[..., 1] / self.resolution, local[..., 0] / self.resolution
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` of the grid's four corners in the map frame (m)."""
+        h, w = self.rows * self.resolution, self.cols * self.resolution
+        corners = self.origin_transform(np.array([[0, 0], [w, 0], [0, h], [w, h]], float))
+        return (*corners.min(axis=0), *corners.max(axis=0))
+
+    def occupied_points(self) -> np.ndarray:
+        """Map-frame centres (m) of the occupied cells, shape ``(K, 2)``."""
+        r, c = np.nonzero(self.occupied_mask())
+        return self.cell_to_world(r, c)
+
+    def __repr__(self) -> str:
+        n = f"{self.name!r}, " if self.name else ""
+        return (f"OccupancyGrid({n}{self.rows}x{self.cols} cells, {self.resolution:g} m/cell, "
+                f"origin=({self.origin[0]:g}, {self.origin[1]:g}, {self.origin[2]:g}))")

@@ -1,0 +1,457 @@
+"""The whole chain of the paper's Fig. 1 behind one call: :func:`merge`.
+
+1. every map gets its scans (its ``.scans.npz``, or virtual scans cast in its free space);
+2. unique poses by the DFT of the scans (Algorithm 1, :mod:`fusionkit.unique_poses`);
+3. agreement between every two robots' unique poses and the fusion order (eq. 2,
+   :mod:`fusionkit.pairing`);
+4. for each step of the order, the alignment by PSO on the masks' MSE (eqs. 3-4,
+   :mod:`fusionkit.alignment`), checked against the maps already fused: a map that does not
+   fit with confidence is left out, never forced;
+5. the fusion of every placed map into the reference frame (Section 3.6, :mod:`fusionkit.fusion`).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .alignment import (Alignment, AlignmentConfig, align_points, mask_points, overlap_score,
+                        refine_points, seed_transforms)
+from .errors import FusionkitError, InputError
+from .fusion import FusedMap, fuse_maps
+from .grid import OccupancyGrid
+from .pairing import FusionPlan, PairAgreement, agreement, fusion_order
+from .pso import PSOConfig, PSOState
+from .resample import canvas_for, resample
+from .scanlog import ScanLog, load_scans, scans_path_for
+from .transform import Transform2D
+from .unique_poses import UniquePoses, find_unique_poses
+
+__all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MergeStep", "MergeResult", "MergeCancelled",
+           "merge", "METHODS", "load_inputs"]
+
+#: Method names accepted by :func:`merge` and ``fusionkit merge --method``.
+METHODS = ("spectral-pso",)
+
+
+class MergeCancelled(FusionkitError):
+    """The callback asked the merge to stop."""
+
+
+@dataclass(frozen=True)
+class MergeConfig:
+    """Settings of :func:`merge`.
+
+    Attributes
+    ----------
+    method : str
+        ``"spectral-pso"``: the paper's method.
+    sub_sec : int
+        Half-width of Algorithm 1's sections (poses).
+    delta : float or None
+        Algorithm 1's divergence threshold; None sets it from ``unique_count``.
+    unique_count : int
+        Unique poses per robot when ``delta`` is None (the paper's "standardized number").
+    theta : float
+        Pearson threshold above which two unique poses agree (eq. 2).
+    alignment : AlignmentConfig
+        Masks and swarm settings (eq. 3).
+    accept : float
+        Least overlap score (:func:`~fusionkit.alignment.overlap_score`) for a map to be merged.
+    min_overlap_cells : int
+        Least number of a map's occupied cells that must land on known cells of the fused map.
+    refine : bool
+        After the swarm on the unique poses' masks, polish each alignment with a local swarm on
+        the whole maps' occupied cells (:func:`~fusionkit.alignment.refine_points`).
+    virtual_poses : int
+        Poses sampled for a map without scans.
+    reference : int
+        Index of the reference map (its frame is the merged frame).
+    seed : int
+        Seed of every random step.
+    """
+
+    method: str = "spectral-pso"
+    sub_sec: int = 5
+    delta: float | None = None
+    unique_count: int = 200
+    theta: float = 0.9
+    alignment: AlignmentConfig = AlignmentConfig()
+    accept: float = 0.7
+    min_overlap_cells: int = 50
+    refine: bool = True
+    virtual_poses: int = 1500
+    reference: int = 0
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.method not in METHODS:
+            raise InputError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
+        if not -1.0 <= self.theta <= 1.0:
+            raise InputError(f"theta is a Pearson correlation threshold in [-1, 1], got {self.theta}")
+        if self.delta is None and self.unique_count < 1:
+            raise InputError(f"unique_count must be >= 1, got {self.unique_count}")
+        if not 0.0 <= self.accept <= 1.0:
+            raise InputError(f"accept is an overlap fraction in [0, 1], got {self.accept}")
+        if self.min_overlap_cells < 0 or self.virtual_poses < 20 or self.sub_sec < 1:
+            raise InputError("min_overlap_cells must be >= 0, virtual_poses >= 20, sub_sec >= 1")
+
+    @property
+    def pso(self) -> PSOConfig:
+        return self.alignment.pso
+
+    def with_pso(self, **kw) -> "MergeConfig":
+        """A copy with some PSO settings changed (particles, iterations, w, c1, c2, ...)."""
+        return replace(self, alignment=replace(self.alignment, pso=replace(self.alignment.pso, **kw)))
+
+
+@dataclass(frozen=True)
+class MergeEvent:
+    """Progress of a merge, as the callback sees it.
+
+    ``stage`` is one of ``"scans"``, ``"unique_poses"``, ``"pairing"``, ``"align"``, ``"fuse"``,
+    ``"done"``; ``step`` of ``total`` counts work in that stage; ``label`` says what is being
+    done ("robot_2 -> robot_1"); during ``"align"``, ``pso`` is the swarm's state after each
+    iteration and ``pair`` the ``(placed, new)`` map indices.
+    """
+
+    stage: str
+    step: int
+    total: int
+    label: str = ""
+    pair: tuple | None = None
+    pso: PSOState | None = None
+
+
+@dataclass(frozen=True)
+class MapPlacement:
+    """Where one input map went. ``transform`` maps its frame into the merged (reference)
+    frame, None when it was not merged; ``confidence`` is its overlap score in [0, 1]."""
+
+    index: int
+    name: str
+    merged: bool
+    transform: Transform2D | None
+    confidence: float
+    overlap_cells: int = 0
+    reason: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class MergeStep:
+    """One alignment of the fusion order: map ``new`` against the fused maps (anchor ``placed``)."""
+
+    placed: int
+    new: int
+    alignment: Alignment | None
+    transform: Transform2D | None
+    confidence: float
+    overlap_cells: int
+    accepted: bool
+    matches: int
+
+
+@dataclass(frozen=True, eq=False)
+class MergeResult:
+    """Everything a merge produced.
+
+    Attributes
+    ----------
+    grid : OccupancyGrid
+        The fused map in the reference frame (unknown where no merged map saw anything).
+    placements : tuple of MapPlacement
+        One per input, in input order.
+    fusion_order : tuple of (int, int)
+        The accepted ``(placed, new)`` steps, in the order they were fused.
+    order : tuple of int
+        The merged maps in the order they were fused (``fused.steps[i]`` holds the first
+        ``i + 1`` of them).
+    fused : FusedMap
+        The fused map with each cell's contributing map (``owner``) and the cumulative steps.
+    unique : tuple of UniquePoses
+        Algorithm 1's result per map.
+    plan : FusionPlan
+        Agreement counts and the planned order.
+    agreements : dict
+        ``(a, b) -> PairAgreement`` for every pair ``a < b``.
+    steps : tuple of MergeStep
+        Every alignment tried, accepted or not, with its PSO history.
+    scans : tuple of ScanLog
+        The scans used (virtual ones for maps that had none).
+    virtual : tuple of bool
+        Which maps got virtual scans.
+    seconds : dict
+        Wall time per stage and ``"total"``.
+    """
+
+    grid: OccupancyGrid
+    placements: tuple
+    fusion_order: tuple
+    order: tuple
+    fused: FusedMap
+    unique: tuple
+    plan: FusionPlan
+    agreements: dict
+    steps: tuple
+    scans: tuple
+    virtual: tuple
+    config: MergeConfig
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def transforms(self) -> list:
+        return [p.transform for p in self.placements]
+
+    @property
+    def all_merged(self) -> bool:
+        return all(p.merged for p in self.placements)
+
+    def report(self, inputs: Sequence[str] | None = None, output: str | None = None) -> dict:
+        """The CONTRACTS section 6 report (``inputs`` as given on the command line)."""
+        names = list(inputs) if inputs is not None else [p.name for p in self.placements]
+        return {
+            "method": self.config.method,
+            "reference": names[self.config.reference],
+            "output": output,
+            "maps": [{"input": names[p.index], "merged": p.merged,
+                      "confidence": round(float(p.confidence), 4),
+                      "transform": None if p.transform is None else p.transform.as_dict()}
+                     for p in self.placements],
+            "fusion_order": [[names[a], names[b]] for a, b in self.fusion_order],
+            "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
+        }
+
+
+def load_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[OccupancyGrid], list[ScanLog | None]]:
+    """Load maps (ROS map_server YAML) and, where ``NAME.scans.npz`` stands beside, their scans."""
+    from .mapio import load_map
+
+    grids, scans = [], []
+    for p in paths:
+        grids.append(load_map(p))
+        sp = scans_path_for(p)
+        scans.append(load_scans(sp) if sp.is_file() else None)
+    return grids, scans
+
+
+def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid]:
+    """Resample every grid to the reference's resolution (nearest neighbour)."""
+    res = grids[ref].resolution
+    out = []
+    for g in grids:
+        if abs(g.resolution - res) <= 1e-9 * res:
+            out.append(g)
+            continue
+        canvas = canvas_for([g], [Transform2D.identity()], res, margin_cells=0)
+        out.append(resample(g, Transform2D.identity(), canvas))
+    return out
+
+
+def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
+          config: MergeConfig = MergeConfig(),
+          callback: Callable[[MergeEvent], bool | None] | None = None) -> MergeResult:
+    """Fuse several robots' maps into the reference map's frame.
+
+    Parameters
+    ----------
+    maps : sequence of OccupancyGrid or paths to map YAML files
+        At least two maps. Paths load their ``.scans.npz`` too when one stands beside.
+    scans : sequence of ScanLog or None, optional
+        Scans per map (None where a map has none: virtual scans are cast in its free space).
+    config : MergeConfig
+    callback : callable(MergeEvent) -> bool, optional
+        Called as the merge progresses (each PSO iteration included); returning True cancels
+        the merge with :class:`MergeCancelled`.
+
+    Returns
+    -------
+    MergeResult
+
+    Raises
+    ------
+    InputError
+        Fewer than two maps, scans not matching the maps, bad settings.
+    MergeCancelled
+        When the callback asked to stop.
+    """
+    t_start = time.perf_counter()
+    seconds: dict = {}
+    maps = list(maps)
+    if len(maps) < 2:
+        raise InputError(f"merging needs at least two maps, got {len(maps)}")
+    if not 0 <= config.reference < len(maps):
+        raise InputError(f"reference index {config.reference} is not one of the {len(maps)} maps")
+    if all(isinstance(m, (str, os.PathLike)) for m in maps):
+        grids, file_scans = load_inputs(maps)
+        scans = file_scans if scans is None else scans
+    elif all(isinstance(m, OccupancyGrid) for m in maps):
+        grids = maps
+    else:
+        raise InputError("maps must be all OccupancyGrid objects or all paths to map YAML files")
+    scans = list(scans) if scans is not None else [None] * len(grids)
+    if len(scans) != len(grids):
+        raise InputError(f"{len(scans)} scan logs for {len(grids)} maps: give one per map (None for none)")
+    names = [g.name or f"map_{k + 1}" for k, g in enumerate(grids)]
+    grids = _same_resolution(list(grids), config.reference)
+
+    def emit(ev: MergeEvent):
+        if callback is not None and callback(ev):
+            raise MergeCancelled("merge cancelled")
+
+    # 1. scans: recorded, or cast virtually in the map's free space
+    t0 = time.perf_counter()
+    from .virtual_scans import virtual_scans
+    logs, virtual = [], []
+    for k, (g, s) in enumerate(zip(grids, scans)):
+        emit(MergeEvent("scans", k, len(grids), names[k]))
+        if s is None:
+            s = virtual_scans(g, n_poses=config.virtual_poses, seed=config.seed + k)
+            virtual.append(True)
+        else:
+            virtual.append(False)
+        logs.append(s)
+    beams = {s.n_beams for s in logs}
+    if len(beams) > 1:
+        raise InputError(f"the maps' scans have different beam counts {sorted(beams)}; spectra can "
+                         "only be compared between scans of the same beam count")
+    seconds["scans"] = time.perf_counter() - t0
+
+    # 2. unique poses (Algorithm 1)
+    t0 = time.perf_counter()
+    unique = []
+    for k, s in enumerate(logs):
+        emit(MergeEvent("unique_poses", k, len(logs), names[k]))
+        try:
+            unique.append(find_unique_poses(s, sub_sec=config.sub_sec, delta=config.delta,
+                                            target=config.unique_count))
+        except InputError as exc:
+            raise InputError(f"{names[k]}: {exc}") from None
+    seconds["unique_poses"] = time.perf_counter() - t0
+
+    # 3. agreement and fusion order (eq. 2)
+    t0 = time.perf_counter()
+    n = len(grids)
+    counts = np.zeros((n, n), int)
+    agreements: dict = {}
+    for a in range(n):
+        for b in range(a + 1, n):
+            emit(MergeEvent("pairing", len(agreements), n * (n - 1) // 2, f"{names[a]} ~ {names[b]}"))
+            ag = agreement(unique[a].unique_spectra, unique[b].unique_spectra, config.theta, a=a, b=b)
+            agreements[(a, b)] = ag
+            counts[a, b] = counts[b, a] = ag.count
+    plan = fusion_order(counts)
+    seconds["pairing"] = time.perf_counter() - t0
+
+    # 4. alignment, step by step, each checked against what is already fused
+    t0 = time.perf_counter()
+    rng = np.random.default_rng(config.seed)
+    transforms: list = [None] * n
+    confidence = [0.0] * n
+    overlap = [0] * n
+    reasons = [""] * n
+    steps: list[MergeStep] = []
+    accepted_order: list = []
+    if plan.steps:
+        first = plan.steps[0][0]
+        transforms[first] = Transform2D.identity()
+        confidence[first] = 1.0
+    for si, (anchor, new) in enumerate(plan.steps):
+        placed = [k for k in range(n) if transforms[k] is not None]
+        ref_pts, mov_idx, seeds = [], set(), []
+        for p in placed:
+            ag = _pair(agreements, p, new)
+            if ag.count == 0:
+                continue
+            up, un = unique[p].indices, unique[new].indices
+            matched_p = up[np.unique(ag.matches[:, 0])]
+            ref_pts.append(transforms[p](mask_points(logs[p], matched_p)))
+            mov_idx.update(un[np.unique(ag.matches[:, 1])].tolist())
+            if config.alignment.seeded:
+                pairs = [(up[i], un[j]) for i, j in ag.matches[: config.alignment.max_seeds]]
+                seeds += [(ag_rho, transforms[p] @ t) for ag_rho, t in
+                          zip(ag.rho[ag.matches[:, 0], ag.matches[:, 1]][: len(pairs)],
+                              seed_transforms(logs[p], logs[new], pairs))]
+        seeds.sort(key=lambda st: -st[0])
+        label = f"{names[new]} -> {names[anchor]}"
+
+        def pso_cb(state: PSOState, _si=si, _label=label, _pair=(anchor, new)):
+            emit(MergeEvent("align", _si, len(plan.steps), _label, _pair, state))
+
+        emit(MergeEvent("align", si, len(plan.steps), label, (anchor, new)))
+        mov_pts = mask_points(logs[new], sorted(mov_idx))
+        if not ref_pts or len(mov_pts) == 0:
+            steps.append(MergeStep(anchor, new, None, None, 0.0, 0, False, 0))
+            reasons[new] = "no matched scan end points to align"
+            continue
+        al = align_points(np.concatenate(ref_pts), mov_pts, grids[config.reference].resolution,
+                          config=config.alignment, seeds=[t for _, t in seeds], seed=rng,
+                          callback=pso_cb)
+        fused_now = fuse_maps([grids[k] for k in placed], [transforms[k] for k in placed]).grid
+        if config.refine:
+            fine = refine_points(fused_now.occupied_points(), grids[new].occupied_points(),
+                                 al.transform, grids[config.reference].resolution,
+                                 config=config.alignment, seed=rng, callback=pso_cb)
+            al = replace(al, transform=fine.transform, params=fine.params, cost=fine.cost,
+                         refinement=fine.pso)
+        score, cells = overlap_score(fused_now, grids[new], al.transform)
+        ok = score >= config.accept and cells >= config.min_overlap_cells
+        steps.append(MergeStep(anchor, new, al, al.transform, score, cells, ok,
+                               int(_pair(agreements, anchor, new).count)))
+        confidence[new], overlap[new] = score, cells
+        if ok:
+            transforms[new] = al.transform
+            accepted_order.append((anchor, new))
+        else:
+            reasons[new] = (f"best alignment agrees on {100 * score:.0f}% of {cells} overlapping "
+                            f"wall cells (needs {100 * config.accept:.0f}% of >= {config.min_overlap_cells})")
+    seconds["align"] = time.perf_counter() - t0
+
+    # express everything in the reference map's frame
+    ref = config.reference
+    if transforms[ref] is None:
+        # the reference was not placed with the others: it stands alone, the rest is not merged
+        transforms = [None] * n
+        transforms[ref] = Transform2D.identity()
+        confidence = [0.0] * n
+        accepted_order = []
+        for k in range(n):
+            if k != ref:
+                reasons[k] = reasons[k] or "no confident link to the reference map"
+    else:
+        to_ref = transforms[ref].inverse
+        transforms = [None if t is None else to_ref @ t for t in transforms]
+    confidence[ref] = 1.0
+    for k in plan.unplaced:
+        reasons[k] = reasons[k] or "its unique poses agree with none of the placed maps"
+
+    # 5. fusion (Section 3.6), in the accepted order
+    t0 = time.perf_counter()
+    emit(MergeEvent("fuse", 0, 1, "fusing"))
+    order = [accepted_order[0][0]] + [k for _, k in accepted_order] if accepted_order else []
+    if ref not in order:
+        order.insert(0, ref)
+    fused = fuse_maps(grids, transforms, order=order, keep_steps=True)
+    seconds["fuse"] = time.perf_counter() - t0
+    seconds["total"] = time.perf_counter() - t_start
+    placements = tuple(
+        MapPlacement(k, names[k], transforms[k] is not None, transforms[k],
+                     float(confidence[k]),
+                     int(overlap[k]), "" if transforms[k] is not None else reasons[k])
+        for k in range(n))
+    emit(MergeEvent("done", 1, 1, "done"))
+    return MergeResult(fused.grid, placements, tuple(accepted_order), tuple(order), fused, tuple(unique), plan,
+                       agreements, tuple(steps), tuple(logs), tuple(virtual), config, seconds)
+
+
+def _pair(agreements: dict, a: int, b: int) -> PairAgreement:
+    """The agreement of maps a and b with a's unique poses first."""
+    if a < b:
+        return agreements[(a, b)]
+    ag = agreements[(b, a)]
+    m = ag.matches[:, ::-1] if ag.count else ag.matches
+    return PairAgreement(a, b, ag.rho.T, np.ascontiguousarray(m), ag.count)

@@ -1,0 +1,234 @@
+"""``fusionkit evaluate`` on a hand-built world, truth.json and merge report."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from fusionkit.cli import main
+from fusionkit.grid import OccupancyGrid
+from fusionkit.mapio import load_map, save_map
+from fusionkit.metrics import evaluate_map
+from fusionkit.resample import canvas_for, resample
+from fusionkit.transform import Transform2D
+
+RES = 0.05
+# robot frame -> world frame. Quarter turns and whole-cell shifts keep nearest-neighbour
+# resampling exact, so a perfect merged map scores exactly 100 %.
+T1 = Transform2D(40 * RES, 10 * RES, math.pi / 2)
+T2 = Transform2D(-20 * RES, 30 * RES, math.pi)
+T3 = Transform2D(5 * RES, -5 * RES, 0.0)
+
+
+def make_world() -> OccupancyGrid:
+    data = np.full((40, 60), -1, np.int8)
+    data[2:38, 2:58] = 0
+    data[2, 2:58] = data[37, 2:58] = 100
+    data[2:38, 2] = data[2:38, 57] = 100
+    data[10:30, 30] = 100
+    return OccupancyGrid(data, RES, (-1.0, -0.5, 0.0), "world")
+
+
+def in_robot_frame(world: OccupancyGrid, t: Transform2D) -> OccupancyGrid:
+    """The world map drawn in a robot's frame (``t``: robot frame -> world frame)."""
+    canvas = canvas_for([world], [t.inverse], RES)
+    return resample(world, t.inverse, canvas)
+
+
+@pytest.fixture()
+def scene(tmp_path):
+    world = make_world()
+    (tmp_path / "maps").mkdir()
+    save_map(world, tmp_path / "maps" / "world.yaml")
+    truth = {"world": "maps/world.yaml", "seed": 7, "robots": [
+        {"name": "robot_1", "transform": T1.as_dict(digits=None), "poses": 10, "path_length_m": 1.0},
+        {"name": "robot_2", "transform": T2.as_dict(digits=None), "poses": 10, "path_length_m": 1.0},
+        {"name": "robot_3", "transform": T3.as_dict(digits=None), "poses": 10, "path_length_m": 1.0},
+    ]}
+    (tmp_path / "truth.json").write_text(json.dumps(truth))
+    out = tmp_path / "out"
+    out.mkdir()
+    merged = in_robot_frame(world, T1)  # merged in robot_1's frame, perfect
+    save_map(merged, out / "merged.yaml")
+    true_12 = T1.inverse @ T2
+    est_12 = Transform2D(true_12.x + 0.1, true_12.y, true_12.theta + math.radians(0.5))
+    report = {
+        "method": "spectral-pso", "reference": "robot_1.yaml", "output": "out/merged.yaml",
+        "maps": [
+            {"input": "robot_1.yaml", "merged": True, "confidence": 1.0,
+             "transform": {"x": 0.0, "y": 0.0, "theta": 0.0}},
+            {"input": "robot_2.yaml", "merged": True, "confidence": 0.93,
+             "transform": est_12.as_dict(digits=None)},
+            {"input": "robot_3.yaml", "merged": False, "confidence": 0.1, "transform": None},
+        ],
+        "fusion_order": [["robot_1.yaml", "robot_2.yaml"]], "seconds": {"total": 0.4},
+    }
+    (out / "merged.report.json").write_text(json.dumps(report))
+    return tmp_path, world, report
+
+
+def run(argv, capsys):
+    code = main(["evaluate", *map(str, argv)])
+    cap = capsys.readouterr()
+    return code, cap.out, cap.err
+
+
+def test_json_with_report_beside_the_map(scene, capsys):
+    root, world, _ = scene
+    code, out, err = run([root / "out/merged.yaml", "--truth", root / "truth.json", "--json"], capsys)
+    assert code == 0, err
+    res = json.loads(out)
+    assert res["reference"] == "robot_1"
+    assert res["report"].endswith("merged.report.json")
+    m = res["metrics"]
+    assert (m["completeness"], m["accuracy"], m["precision"], m["efficiency"]) == (100.0,) * 4
+    assert m["known_truth"] == int(world.known_mask().sum())
+    maps = {r["robot"]: r for r in res["maps"]}
+    assert list(maps) == ["robot_1", "robot_2", "robot_3"]
+    assert maps["robot_1"]["error"] == {"translation_m": 0.0, "translation_cells": 0.0, "rotation_deg": 0.0}
+    e2 = maps["robot_2"]["error"]
+    assert e2["translation_m"] == pytest.approx(0.1, abs=1e-4)
+    assert e2["translation_cells"] == pytest.approx(2.0, abs=1e-3)
+    assert e2["rotation_deg"] == pytest.approx(0.5, abs=1e-4)
+    true_12 = T1.inverse @ T2
+    assert maps["robot_2"]["true_transform"]["x"] == pytest.approx(true_12.x, abs=1e-6)
+    assert maps["robot_2"]["merged"] is True and maps["robot_2"]["confidence"] == 0.93
+    assert maps["robot_3"]["merged"] is False and maps["robot_3"]["error"] is None
+    assert maps["robot_3"]["transform"] is None
+
+
+def test_metrics_equal_the_library_call(scene, capsys):
+    root, world, _ = scene
+    # spoil the merged map: drop a block of cells and draw a false wall
+    merged = load_map(root / "out/merged.yaml")
+    data = merged.data.copy()
+    data[5:15, 5:20] = -1
+    data[20, 10:30] = 100
+    save_map(merged.with_data(data), root / "out/merged.yaml")
+    code, out, err = run([root / "out/merged.yaml", "--truth", root / "truth.json", "--json"], capsys)
+    assert code == 0, err
+    want = evaluate_map(load_map(root / "out/merged.yaml"), world, T1).as_dict()
+    got = json.loads(out)["metrics"]
+    assert got == want
+    assert got["completeness"] < 100.0 and got["precision"] < 100.0
+
+
+def test_plain_output_is_a_table(scene, capsys):
+    root, _, _ = scene
+    code, out, err = run([root / "out/merged.yaml", "--truth", root / "truth.json"], capsys)
+    assert code == 0 and err == ""
+    assert any(line.split() == ["completeness", "100.00", "%"] for line in out.splitlines())
+    assert "precision (within 1 cell)" in out
+    lines = out.splitlines()
+    r2 = next(line for line in lines if line.strip().startswith("robot_2.yaml"))
+    assert "yes" in r2 and "0.93" in r2 and "0.100" in r2 and "2.0" in r2 and "0.50" in r2
+    r3 = next(line for line in lines if line.strip().startswith("robot_3.yaml"))
+    assert " no " in r3
+
+
+def test_report_json_in_the_same_directory(scene, capsys):
+    root, _, report = scene
+    (root / "out/merged.report.json").rename(root / "out/report.json")
+    code, out, _ = run([root / "out/merged.yaml", "--truth", root / "truth.json", "--json"], capsys)
+    assert code == 0 and json.loads(out)["report"].endswith("report.json")
+    assert len(json.loads(out)["maps"]) == 3
+    # a report.json for another output is not this map's report
+    report["output"] = "out/other.yaml"
+    (root / "out/report.json").write_text(json.dumps(report))
+    code, out, _ = run([root / "out/merged.yaml", "--truth", root / "truth.json", "--json"], capsys)
+    res = json.loads(out)
+    assert code == 0 and res["report"] is None and res["maps"] == []
+    assert res["reference"] == "robot_1"  # the first robot of truth.json
+
+
+def test_explicit_report_and_reference_without_report(scene, capsys):
+    root, world, _ = scene
+    rep = root / "elsewhere.json"
+    (root / "out/merged.report.json").rename(rep)
+    code, out, _ = run([root / "out/merged.yaml", "--truth", root / "truth.json", "--report", rep,
+                        "--json"], capsys)
+    assert code == 0 and len(json.loads(out)["maps"]) == 3
+    # without a report the frame comes from --reference: the wrong robot scores badly
+    code, out, _ = run([root / "out/merged.yaml", "--truth", root / "truth.json",
+                        "--reference", "robot_2", "--json"], capsys)
+    res = json.loads(out)
+    assert code == 0 and res["reference"] == "robot_2" and res["maps"] == []
+    assert res["metrics"]["accuracy"] < 90.0
+    want = evaluate_map(load_map(root / "out/merged.yaml"), world, T2).as_dict()
+    assert res["metrics"] == want
+
+
+def test_world_path_relative_to_the_current_directory(scene, capsys, monkeypatch):
+    root, _, _ = scene
+    sub = root / "sim"
+    sub.mkdir()
+    (sub / "truth.json").write_text((root / "truth.json").read_text())  # "maps/world.yaml"
+    monkeypatch.chdir(root)
+    code, out, err = run(["out/merged.yaml", "--truth", "sim/truth.json", "--json"], capsys)
+    assert code == 0, err
+    assert json.loads(out)["metrics"]["completeness"] == 100.0
+
+
+def write(path, obj):
+    path.write_text(obj if isinstance(obj, str) else json.dumps(obj))
+    return path
+
+
+@pytest.mark.parametrize("case, message", [
+    ("missing_merged", "no such map file"),
+    ("missing_truth", "no such truth file"),
+    ("truth_not_json", "not valid JSON"),
+    ("truth_no_robots", "no robots"),
+    ("truth_bad_transform", "numeric x, y"),
+    ("world_missing", "world map"),
+    ("unknown_reference", "no such robot"),
+    ("report_other_output", "this report is for"),
+    ("report_unknown_robot", "not in"),
+    ("report_reference_conflict", "disagrees"),
+    ("report_missing", "no such merge report"),
+])
+def test_bad_input_one_line_exit_2(scene, capsys, case, message):
+    root, _, report = scene
+    merged, truth = root / "out/merged.yaml", root / "truth.json"
+    t = json.loads(truth.read_text())
+    extra = []
+    if case == "missing_merged":
+        merged = root / "out/nothing.yaml"
+    elif case == "missing_truth":
+        truth = root / "nope.json"
+    elif case == "truth_not_json":
+        truth = write(root / "t.json", "{world: ")
+    elif case == "truth_no_robots":
+        truth = write(root / "t.json", {**t, "robots": []})
+    elif case == "truth_bad_transform":
+        t["robots"][1]["transform"] = {"x": 1}
+        truth = write(root / "t.json", t)
+    elif case == "world_missing":
+        truth = write(root / "t.json", {**t, "world": "maps/none.yaml"})
+    elif case == "unknown_reference":
+        (root / "out/merged.report.json").unlink()
+        extra = ["--reference", "robot_9"]
+    elif case == "report_other_output":
+        extra = ["--report", write(root / "r.json", {**report, "output": "x/other.yaml"})]
+    elif case == "report_unknown_robot":
+        report["maps"][1]["input"] = "robot_7.yaml"
+        write(root / "out/merged.report.json", report)
+    elif case == "report_reference_conflict":
+        extra = ["--reference", "robot_2"]
+    elif case == "report_missing":
+        extra = ["--report", root / "none.json"]
+    code, out, err = run([merged, "--truth", truth, *extra], capsys)
+    assert code == 2
+    assert out == ""
+    assert len(err.strip().splitlines()) == 1 and message in err, err
+    assert err.startswith("fusionkit evaluate: error:")
+
+
+def test_help_explains_every_option(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluate", "--help"])
+    assert exc.value.code == 0
+    text = capsys.readouterr().out
+    for opt in ("--truth", "--report", "--reference", "--json", "MERGED.yaml"):
+        assert opt in text

@@ -1,0 +1,269 @@
+"""What the terminal UI does, without the UI: find maps, run a merge, score it, export it.
+
+Every step calls the same library functions as the command line (:func:`fusionkit.pipeline.merge`,
+:func:`fusionkit.mapio.save_map`, :func:`fusionkit.cli.evaluate.read_truth`,
+:func:`fusionkit.metrics.evaluate_map`), so a merge made here is the merge ``fusionkit merge``
+would make with the same settings.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+from fusionkit._atomic import check_not_input, write_text_atomic
+from fusionkit.errors import FusionkitError, InputError
+from fusionkit.pipeline import MergeConfig, MergeEvent, MergeResult, merge
+
+__all__ = ["MAP_SUFFIXES", "is_map_file", "find_maps", "truth_beside", "Evaluation",
+           "evaluate_result", "ExportPaths", "export_paths", "export_result", "run_merge",
+           "initial_selection"]
+
+#: File name endings the map picker lists (map_server YAML).
+MAP_SUFFIXES = (".yaml", ".yml")
+
+
+def is_map_file(path: Path) -> bool:
+    """Whether ``path`` is named like a map YAML (its contents are not read)."""
+    return path.suffix.lower() in MAP_SUFFIXES
+
+
+def _world_of(directory: Path) -> Path | None:
+    """The ground-truth world map named by ``directory/truth.json``, if there is one."""
+    truth = directory / "truth.json"
+    if not truth.is_file():
+        return None
+    try:
+        doc = json.loads(truth.read_text(encoding="utf-8"))
+    except (OSError, UnicodeError, json.JSONDecodeError):
+        return None
+    world = doc.get("world") if isinstance(doc, dict) else None
+    if not isinstance(world, str) or not world.strip():
+        return None
+    p = Path(world.strip())
+    return (p if p.is_absolute() else directory / p).resolve()
+
+
+def find_maps(directory) -> list[Path]:
+    """The robot maps of a directory, sorted by name.
+
+    Every ``*.yaml`` / ``*.yml`` file directly in ``directory`` except those that are not
+    inputs to a merge: a merged map (a ``<stem>.report.json`` stands beside it) and the
+    ground-truth world that a ``truth.json`` in the directory names.
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+
+    Raises
+    ------
+    InputError
+        ``directory`` is not a readable directory.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise InputError(f"{directory}: is not a directory; give a directory of map YAML files")
+    world = _world_of(directory)
+    try:
+        entries = sorted(directory.iterdir())
+    except OSError as exc:
+        raise InputError(f"{directory}: cannot be listed ({exc.strerror or exc}); check its permissions") from None
+    out = []
+    for p in entries:
+        if not p.is_file() or not is_map_file(p):
+            continue
+        if p.with_name(p.stem + ".report.json").exists():
+            continue
+        if world is not None and p.resolve() == world:
+            continue
+        out.append(p)
+    return out
+
+
+def initial_selection(paths: Sequence) -> tuple[Path, list[Path]]:
+    """Where the picker starts and which maps are selected, from the command-line arguments.
+
+    No argument: the current directory, nothing selected. One directory: that directory and
+    its robot maps (:func:`find_maps`). Map files: their common directory and those maps.
+
+    Raises
+    ------
+    InputError
+        An argument that does not exist, a mix of directories and files, several directories,
+        or a file that is not named like a map YAML.
+    """
+    paths = [Path(p) for p in paths]
+    if not paths:
+        return Path("."), []
+    for p in paths:
+        if not p.exists():
+            raise InputError(f"{p}: no such file or directory; check the path")
+    dirs = [p for p in paths if p.is_dir()]
+    if dirs:
+        if len(paths) > 1:
+            raise InputError("give one directory, or map YAML files, not both or several directories")
+        return dirs[0], find_maps(dirs[0])
+    for p in paths:
+        if not is_map_file(p):
+            raise InputError(f"{p}: is not a map YAML (.yaml or .yml); give the map's YAML file")
+    parents = {p.parent.resolve() for p in paths}
+    root = paths[0].parent if len(parents) == 1 else Path(_common_parent(paths))
+    return root, list(dict.fromkeys(paths))
+
+
+def _common_parent(paths: Sequence[Path]) -> str:
+    import os.path
+
+    return os.path.commonpath([str(p.parent.resolve()) for p in paths])
+
+
+def truth_beside(reference_map) -> Path | None:
+    """The ``truth.json`` in the reference map's directory, if there is one."""
+    p = Path(reference_map).parent / "truth.json"
+    return p if p.is_file() else None
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """The paper's Table 1 metrics of a merge, against a simulation's ground truth.
+
+    Attributes
+    ----------
+    truth : Path
+        The truth.json used.
+    reference : str
+        Robot name whose map frame is the merged frame.
+    metrics : MapMetrics
+        Of the fused map (CONTRACTS section 7), in percent.
+    steps : tuple of MapMetrics
+        Of the fused map after each fusion step (``M1``, ``M1,2``, ...).
+    errors : tuple of TransformError or None
+        Per input map, its estimated transform against the true one (None when not merged or
+        not in the truth file).
+    """
+
+    truth: Path
+    reference: str
+    metrics: object
+    steps: tuple
+    errors: tuple
+
+
+def evaluate_result(result: MergeResult, inputs: Sequence, truth_path) -> Evaluation:
+    """Score a merge against the ground truth in ``truth_path`` (CONTRACTS sections 5 and 7).
+
+    The merged frame is the reference map's frame, so the fused map goes into the world frame
+    by the reference robot's transform; each map's true transform into the merged frame is
+    ``inv(T_ref) @ T_k``. Robots are matched to maps by the YAML file's stem.
+
+    Raises
+    ------
+    InputError
+        A malformed truth file, or a reference map whose robot the truth file does not know.
+    """
+    from fusionkit.cli.evaluate import read_truth
+    from fusionkit.mapio import load_map
+    from fusionkit.metrics import evaluate_map, table1, transform_errors
+
+    truth = read_truth(truth_path)
+    names = [Path(p).stem for p in inputs]
+    ref = names[result.config.reference]
+    if ref not in truth.robots:
+        raise InputError(f"{truth.path}: the reference map {ref} is not one of its robots "
+                         f"({', '.join(truth.robots)}); no metrics for this merge")
+    world = load_map(truth.world)
+    t_ref = truth.robots[ref]
+    metrics = evaluate_map(result.grid, world, t_ref)
+    steps = tuple(table1(result.fused.steps, world, t_ref))
+    errors = []
+    for p, name in zip(result.placements, names):
+        if p.transform is None or name not in truth.robots:
+            errors.append(None)
+        else:
+            errors.append(transform_errors(p.transform, t_ref.inverse @ truth.robots[name],
+                                           result.grid.resolution))
+    return Evaluation(truth.path, ref, metrics, steps, tuple(errors))
+
+
+def run_merge(inputs: Sequence, config: MergeConfig,
+              callback: Callable[[MergeEvent], bool | None] | None = None) -> MergeResult:
+    """:func:`fusionkit.pipeline.merge` of the map files ``inputs`` (their scans beside them)."""
+    return merge([str(p) for p in inputs], config=config, callback=callback)
+
+
+@dataclass(frozen=True)
+class ExportPaths:
+    """The files an export writes: the map YAML, its image and the merge report."""
+
+    yaml: Path
+    image: Path
+    report: Path
+
+    @property
+    def all(self) -> tuple[Path, Path, Path]:
+        return (self.yaml, self.image, self.report)
+
+    def existing(self) -> list[Path]:
+        """Those of the files that already exist (an export would overwrite them)."""
+        return [p for p in self.all if p.exists()]
+
+
+def export_paths(yaml_path) -> ExportPaths:
+    """The files written for the map ``yaml_path``: ``NAME.yaml``, ``NAME.pgm`` and
+    ``NAME.report.json`` beside it (the names ``fusionkit merge`` and ``fusionkit evaluate`` use).
+
+    Raises
+    ------
+    InputError
+        An empty path, or one not ending in .yaml / .yml.
+    """
+    text = str(yaml_path).strip()
+    if not text:
+        raise InputError("type the path of the map YAML to write, e.g. merged.yaml")
+    p = Path(text).expanduser()
+    if not is_map_file(p):
+        raise InputError(f"{p}: a map is saved as a .yaml file; end the name with .yaml")
+    return ExportPaths(p, p.with_suffix(".pgm"), p.with_name(p.stem + ".report.json"))
+
+
+def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPaths:
+    """Write the fused map (YAML + PGM) and the merge report (CONTRACTS section 6).
+
+    Each file is written atomically and no input map, image or scan log is ever overwritten;
+    existing output files are replaced (ask first).
+
+    Parameters
+    ----------
+    result : MergeResult
+    inputs : sequence of paths
+        The input maps, in merge order, as the report should name them.
+    yaml_path : str or os.PathLike
+        The map YAML to write.
+
+    Raises
+    ------
+    InputError
+        A bad output name, a missing directory, or an output that is one of the inputs.
+    """
+    from fusionkit.mapio import save_map
+    from fusionkit.scanlog import scans_path_for
+
+    paths = export_paths(yaml_path)
+    inputs = [str(p) for p in inputs]
+    protected = inputs + [str(scans_path_for(p)) for p in inputs]
+    check_not_input([paths.report], protected)
+    save_map(result.grid, paths.yaml, inputs=protected)
+    report = result.report(inputs, output=str(paths.yaml))
+    write_text_atomic(paths.report, json.dumps(report, indent=2) + "\n")
+    return paths
+
+
+def describe_error(exc: BaseException) -> str:
+    """One line for a notification: the message of a fusionkit error, else the error's type."""
+    if isinstance(exc, FusionkitError):
+        return str(exc)
+    if isinstance(exc, OSError):
+        return f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")
+    return f"{type(exc).__name__}: {exc}"

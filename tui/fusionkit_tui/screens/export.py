@@ -1,0 +1,166 @@
+"""Exporting the merged map: the path dialog and the overwrite confirmation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from textual import on
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.screen import ModalScreen
+from textual.widgets import Button, Input, Label, Static
+
+from fusionkit.errors import InputError
+
+from ..runner import export_paths
+
+__all__ = ["ExportScreen", "ConfirmScreen", "overwrite_question"]
+
+
+class ExportScreen(ModalScreen[str | None]):
+    """Ask for the map YAML to write; dismisses with the typed path, or None when cancelled."""
+
+    DEFAULT_CSS = """
+    ExportScreen {
+        align: center middle;
+    }
+    ExportScreen > Vertical {
+        width: 72;
+        max-width: 100%;
+        height: auto;
+        border: round $accent;
+        background: $panel;
+        padding: 0 1;
+    }
+    ExportScreen Input {
+        margin: 1 0 0 0;
+    }
+    ExportScreen #export-files {
+        color: $text-muted;
+        height: auto;
+    }
+    ExportScreen #export-error {
+        color: $text-error;
+        height: auto;
+    }
+    ExportScreen Horizontal {
+        height: auto;
+        align-horizontal: right;
+    }
+    ExportScreen Button {
+        margin-left: 1;
+    }
+    """
+
+    BINDINGS = [Binding("escape", "cancel", "Cancel")]
+
+    def __init__(self, default: str) -> None:
+        super().__init__()
+        self._default = default
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Label("Export the merged map (ROS map_server YAML + PGM) and the merge report")
+            yield Input(self._default, id="export-path", placeholder="path/to/merged.yaml")
+            yield Static("", id="export-files")
+            yield Static("", id="export-error")
+            with Horizontal():
+                yield Button("Save", id="save", variant="primary")
+                yield Button("Cancel", id="cancel")
+
+    def on_mount(self) -> None:
+        self._describe(self._default)
+        inp = self.query_one(Input)
+        inp.focus()
+        inp.cursor_position = len(inp.value)
+
+    def _describe(self, text: str) -> bool:
+        files = self.query_one("#export-files", Static)
+        error = self.query_one("#export-error", Static)
+        try:
+            p = export_paths(text)
+        except InputError as exc:
+            files.update("")
+            error.update(str(exc))
+            return False
+        files.update(f"writes {p.yaml.name}, {p.image.name} and {p.report.name} in "
+                     f"{p.yaml.parent if str(p.yaml.parent) else '.'}; enter saves, escape cancels")
+        error.update("")
+        return True
+
+    @on(Input.Changed)
+    def _on_changed(self, event: Input.Changed) -> None:
+        self._describe(event.value)
+
+    @on(Input.Submitted)
+    @on(Button.Pressed, "#save")
+    def _save(self) -> None:
+        text = self.query_one(Input).value
+        if self._describe(text):
+            self.dismiss(text.strip())
+
+    @on(Button.Pressed, "#cancel")
+    def action_cancel(self) -> None:
+        self.dismiss(None)
+
+
+class ConfirmScreen(ModalScreen[bool]):
+    """A yes / no question; dismisses with True for yes."""
+
+    DEFAULT_CSS = """
+    ConfirmScreen {
+        align: center middle;
+    }
+    ConfirmScreen > Vertical {
+        width: 64;
+        max-width: 100%;
+        height: auto;
+        border: round $warning;
+        background: $panel;
+        padding: 0 1;
+    }
+    ConfirmScreen #question {
+        height: auto;
+        margin-bottom: 1;
+    }
+    ConfirmScreen Horizontal {
+        height: auto;
+        align-horizontal: right;
+    }
+    ConfirmScreen Button {
+        margin-left: 1;
+    }
+    """
+
+    BINDINGS = [
+        Binding("y", "answer(True)", "Yes"),
+        Binding("n,escape", "answer(False)", "No"),
+    ]
+
+    def __init__(self, question: str) -> None:
+        super().__init__()
+        self._question = question
+
+    def compose(self) -> ComposeResult:
+        with Vertical():
+            yield Static(self._question, id="question")
+            with Horizontal():
+                yield Button("Overwrite (y)", id="yes", variant="warning")
+                yield Button("Keep them (n)", id="no")
+
+    def on_mount(self) -> None:
+        self.query_one("#no", Button).focus()
+
+    @on(Button.Pressed)
+    def _pressed(self, event: Button.Pressed) -> None:
+        self.dismiss(event.button.id == "yes")
+
+    def action_answer(self, yes: bool) -> None:
+        self.dismiss(yes)
+
+
+def overwrite_question(existing: list[Path]) -> str:
+    """The confirmation text for replacing ``existing`` files."""
+    names = "\n".join(f"  {p}" for p in existing)
+    return f"These files exist and will be replaced:\n{names}\nOverwrite them?"

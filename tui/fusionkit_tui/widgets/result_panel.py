@@ -1,0 +1,171 @@
+"""The merge result: the fused map coloured by contributing robot, each map's placement, and
+the paper's Table 1 metrics when the ground truth is known."""
+
+from __future__ import annotations
+
+import math
+
+from rich.text import Text
+from textual import on
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Horizontal, Vertical
+from textual.widgets import DataTable, Label, Static
+
+from fusionkit.metrics import table1_label
+
+from .map_preview import MapPreview, robot_colour
+
+__all__ = ["ResultPanel"]
+
+
+class ResultPanel(Vertical):
+    """Shows a :class:`~fusionkit.pipeline.MergeResult` (and its evaluation, if any)."""
+
+    DEFAULT_CSS = """
+    ResultPanel {
+        height: 1fr;
+    }
+    ResultPanel > Horizontal {
+        height: 1fr;
+    }
+    ResultPanel #fused {
+        width: 2fr;
+    }
+    ResultPanel #tables {
+        width: 3fr;
+        padding-left: 1;
+    }
+    ResultPanel .heading {
+        color: $text-accent;
+        text-style: bold;
+        width: 1fr;
+    }
+    ResultPanel #legend, ResultPanel #why, ResultPanel #no-metrics {
+        height: auto;
+        color: $text-muted;
+    }
+    ResultPanel DataTable {
+        height: auto;
+        max-height: 9;
+        background: $surface;
+    }
+    ResultPanel #metrics-heading {
+        margin-top: 1;
+    }
+    """
+
+    BINDINGS = [Binding("v", "toggle_view", "Colours")]
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self._result = None
+        self._names: list[str] = []
+        self._by_robot = True
+
+    def compose(self) -> ComposeResult:
+        with Horizontal():
+            with Vertical(id="fused"):
+                yield Label("Fused map", id="fused-heading", classes="heading")
+                yield MapPreview(id="fused-map")
+                yield Static("", id="legend")
+            with Vertical(id="tables"):
+                yield Label("Maps: transform into the reference frame", classes="heading")
+                yield DataTable(id="placements", cursor_type="row")
+                yield Static("", id="why")
+                yield Label("Table 1 metrics (%)", id="metrics-heading", classes="heading")
+                yield DataTable(id="metrics", cursor_type="none")
+                yield Static("", id="no-metrics")
+
+    def on_mount(self) -> None:
+        self.query_one("#fused-map", MapPreview).clear("no merge yet: press r to run")
+        self.query_one("#metrics").display = False
+
+    @property
+    def result(self):
+        return self._result
+
+    def show(self, result, names: list[str], evaluation=None, evaluation_error: str | None = None) -> None:
+        """Show ``result``; ``names`` are the input maps' names in input order."""
+        self._result, self._names = result, list(names)
+        self._draw_map()
+        table = self.query_one("#placements", DataTable)
+        table.clear(columns=True)
+        cols = ["map", "merged", "conf", "x (m)", "y (m)", "th (deg)"]
+        if evaluation is not None:
+            cols += ["err (m)", "err (deg)"]
+        table.add_columns(*cols)
+        for p in result.placements:
+            name = Text(self._names[p.index], style=robot_colour(p.index) if p.merged else "dim")
+            if p.transform is None:
+                row = [name, "no", f"{p.confidence:.2f}", "-", "-", "-"]
+            else:
+                t = p.transform
+                row = [name, "yes", f"{p.confidence:.2f}", f"{t.x:.2f}", f"{t.y:.2f}",
+                       f"{math.degrees(t.theta):.1f}"]
+            if evaluation is not None:
+                e = evaluation.errors[p.index]
+                row += (["-", "-"] if e is None else [f"{e.translation_m:.2f}", f"{e.rotation_deg:.1f}"])
+            table.add_row(*row, key=str(p.index))
+        self._explain(0)
+        metrics = self.query_one("#metrics", DataTable)
+        note = self.query_one("#no-metrics", Static)
+        metrics.clear(columns=True)
+        if evaluation is None:
+            metrics.display = False
+            note.update(evaluation_error or "no truth.json beside the maps: no ground truth to score against")
+            return
+        metrics.display = True
+        note.update(f"against {evaluation.truth.name}, in {evaluation.reference}'s frame")
+        metrics.add_columns("maps", "compl", "acc", "prec", "eff")
+        order = list(result.order)
+        for k, m in enumerate(evaluation.steps):
+            # row k is the fused map after the (k+1)-th map of the fusion order was added
+            label = (self._names[order[k]] if k == 0 else "+ " + self._names[order[k]]) \
+                if k < len(order) else table1_label(k)
+            metrics.add_row(label, f"{m.completeness:.1f}", f"{m.accuracy:.1f}",
+                            f"{m.precision:.1f}", f"{m.efficiency:.1f}")
+
+    def _draw_map(self) -> None:
+        if self._result is None:
+            return
+        r = self._result
+        preview = self.query_one("#fused-map", MapPreview)
+        preview.show(r.grid, r.fused.owner if self._by_robot else None)
+        legend = Text()
+        if self._by_robot and not getattr(self.app, "no_color", False):
+            for p in r.placements:
+                if p.merged:
+                    legend.append("█ ", style=robot_colour(p.index))
+                    legend.append(f"{self._names[p.index]}  ")
+        else:
+            legend.append("█ wall  ░ free  (blank) unknown" if getattr(self.app, "no_color", False)
+                          else "white wall, blue free, black unknown")
+        self.query_one("#legend", Static).update(legend)
+        merged = sum(p.merged for p in r.placements)
+        self.query_one("#fused-heading", Label).update(
+            f"Fused map: {merged} of {len(r.placements)} maps, {r.grid.cols}x{r.grid.rows} cells")
+
+    def _explain(self, row: int) -> None:
+        why = self.query_one("#why", Static)
+        if self._result is None or not 0 <= row < len(self._result.placements):
+            why.update("")
+            return
+        p = self._result.placements[row]
+        name = self._names[p.index]
+        if p.index == self._result.config.reference:
+            why.update(f"{name}: the reference; the merged map is in its frame")
+        elif p.merged:
+            why.update(f"{name}: merged, {100 * p.confidence:.0f}% of {p.overlap_cells} "
+                       f"overlapping wall cells agree")
+        else:
+            why.update(Text(f"{name}: not merged: {p.reason}", style="yellow"))
+
+    @on(DataTable.RowHighlighted, "#placements")
+    def _on_row(self, event: DataTable.RowHighlighted) -> None:
+        self._explain(event.cursor_row)
+
+    def action_toggle_view(self) -> None:
+        """Switch the fused map between robot colours and plain states."""
+        self._by_robot = not self._by_robot
+        self._draw_map()

@@ -1,0 +1,155 @@
+"""The merge as it runs: which stage, which pair is being aligned, what is left, and the
+live convergence plot."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.containers import Vertical
+from textual.widgets import ProgressBar, Static
+
+from ..messages import STAGES, MergeProgress
+from .convergence_plot import ConvergencePlot
+
+__all__ = ["RunPanel", "overall_fraction"]
+
+# Share of the progress bar per stage (alignment is most of the work).
+_WEIGHTS = {"scans": 0.10, "unique_poses": 0.20, "pairing": 0.05, "align": 0.60, "fuse": 0.05}
+
+
+def overall_fraction(stage: str, step: int, total: int, iteration: int | None = None,
+                     iterations: int | None = None) -> float:
+    """How far a merge is, in [0, 1], from a progress event."""
+    names = [s for s, _ in STAGES]
+    if stage == "done":
+        return 1.0
+    if stage not in names:
+        return 0.0
+    done = sum(_WEIGHTS[s] for s in names[: names.index(stage)])
+    within = step / total if total > 0 else 0.0
+    if stage == "align" and iteration is not None and iterations:
+        within = (step + min(1.0, iteration / iterations)) / total if total > 0 else 0.0
+    return min(1.0, done + _WEIGHTS[stage] * within)
+
+
+class RunPanel(Vertical):
+    """Progress of the current (or last) merge."""
+
+    DEFAULT_CSS = """
+    RunPanel {
+        height: 1fr;
+        padding: 0 1;
+    }
+    RunPanel #stages {
+        height: 1;
+    }
+    RunPanel ProgressBar {
+        height: 1;
+    }
+    RunPanel ProgressBar Bar {
+        width: 1fr;
+    }
+    RunPanel #detail, RunPanel #left {
+        height: 1;
+        color: $text-muted;
+        text-wrap: nowrap;
+        text-overflow: ellipsis;
+    }
+    """
+
+    def __init__(self, *, id: str | None = None) -> None:
+        super().__init__(id=id)
+        self._stage = ""
+        self._iterations = 0
+        self._step = -1
+
+    def compose(self) -> ComposeResult:
+        yield Static("", id="stages")
+        yield ProgressBar(total=100, show_eta=False, id="bar")
+        yield Static("", id="detail")
+        yield Static("", id="left")
+        yield ConvergencePlot(id="plot")
+
+    def on_mount(self) -> None:
+        self.idle()
+
+    @property
+    def plot(self) -> ConvergencePlot:
+        return self.query_one(ConvergencePlot)
+
+    def _stages(self, current: str, step: int = 0, total: int = 0, final: str = "") -> Text:
+        names = [s for s, _ in STAGES]
+        text = Text()
+        idx = names.index(current) if current in names else (len(names) if current == "done" else -1)
+        for k, (name, words) in enumerate(STAGES):
+            if k:
+                text.append("  ")
+            if k < idx:
+                text.append(f"✓ {words}", style="green")
+            elif k == idx:
+                more = f" {step + 1}/{total}" if name == "align" and total else ""
+                text.append(f"▶ {words}{more}", style="bold")
+            else:
+                text.append(f"· {words}", style="dim")
+        if final:
+            text.append(f"   {final}", style="bold")
+        return text
+
+    def idle(self) -> None:
+        """Before any run."""
+        self.query_one("#stages", Static).update(self._stages(""))
+        self.query_one(ProgressBar).update(progress=0)
+        self.query_one("#detail", Static).update("not run yet: select two or more maps and press r")
+        self.query_one("#left", Static).update("")
+
+    def begin(self, maps: int, iterations: int) -> None:
+        """A merge of ``maps`` maps with up to ``iterations`` PSO iterations per alignment starts."""
+        self._iterations = iterations
+        self._stage, self._step = "", -1
+        self.plot.reset()
+        self.query_one(ProgressBar).update(progress=0)
+        self.query_one("#stages", Static).update(self._stages("scans"))
+        self.query_one("#detail", Static).update(f"merging {maps} maps; escape cancels")
+        self.query_one("#left", Static).update("")
+
+    def update_progress(self, ev: MergeProgress) -> None:
+        """Show one progress event of the worker."""
+        if ev.stage == "done":
+            return
+        self.query_one("#stages", Static).update(self._stages(ev.stage, ev.step, ev.total))
+        self.query_one(ProgressBar).update(
+            progress=100 * overall_fraction(ev.stage, ev.step, ev.total, ev.iteration, self._iterations))
+        detail = self.query_one("#detail", Static)
+        left = self.query_one("#left", Static)
+        if ev.stage == "align":
+            if self._stage != "align" or ev.step != self._step:
+                self.plot.start(ev.label)
+                self._step = ev.step
+            if ev.iteration is not None:
+                self.plot.add(ev.iteration, ev.best_cost)
+                detail.update(f"aligning {ev.label}: iteration {ev.iteration} of at most "
+                              f"{self._iterations}, best cost {ev.best_cost:.5f}")
+            else:
+                detail.update(f"aligning {ev.label}")
+            after = ev.total - ev.step - 1
+            left.update(f"alignment {ev.step + 1} of {ev.total}; "
+                        f"{after} more after this, then fusion")
+        else:
+            what = {"scans": "reading scans", "unique_poses": "finding unique poses (Algorithm 1)",
+                    "pairing": "comparing unique poses (eq. 2)", "fuse": "fusing the placed maps"}
+            detail.update(f"{what.get(ev.stage, ev.stage)}: {ev.label}")
+            left.update(f"{ev.step + 1} of {ev.total}" if ev.total else "")
+        self._stage = ev.stage
+
+    def finish(self, summary: str) -> None:
+        """The merge ended well."""
+        self.query_one("#stages", Static).update(self._stages("done", final=""))
+        self.query_one(ProgressBar).update(progress=100)
+        self.query_one("#detail", Static).update(summary)
+        self.query_one("#left", Static).update("press 4 for the result, e to export")
+
+    def stopped(self, why: str) -> None:
+        """The merge was cancelled or failed: say so, keep the plot as it was."""
+        self.query_one("#stages", Static).update(self._stages(self._stage or ""))
+        self.query_one("#detail", Static).update(Text(why, style="bold"))
+        self.query_one("#left", Static).update("press r to run again")

@@ -1,0 +1,235 @@
+"""The merge settings: method, Algorithm 1 and eq. 2 thresholds, the PSO swarm, the seed.
+
+Each value is checked as it is typed (the field turns red and the hint says what is allowed);
+:meth:`SettingsForm.config` turns the fields into a :class:`fusionkit.pipeline.MergeConfig`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from rich.text import Text
+from textual import on
+from textual.app import ComposeResult
+from textual.containers import Grid, VerticalScroll
+from textual.validation import ValidationResult, Validator
+from textual.widgets import Input, Label, Select, Static
+
+from fusionkit.errors import InputError
+from fusionkit.pipeline import METHODS, MergeConfig
+
+__all__ = ["Setting", "SETTINGS", "SettingsForm", "parse_setting"]
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One numeric setting of the form.
+
+    ``kind`` is ``"int"`` or ``"float"``; ``lo``/``hi`` bound it (inclusive); ``optional``
+    allows a blank field (meaning "not set"); ``default`` is shown beside it.
+    """
+
+    key: str
+    label: str
+    kind: str
+    lo: float
+    hi: float
+    default: object
+    help: str
+    optional: bool = False
+
+    def allowed(self) -> str:
+        what = "a whole number" if self.kind == "int" else "a number"
+        lo = "" if math.isinf(self.lo) else f"{self.lo:g}"
+        hi = "" if math.isinf(self.hi) else f"{self.hi:g}"
+        if lo and hi:
+            rng = f" from {lo} to {hi}"
+        elif lo:
+            rng = f" >= {lo}"
+        elif hi:
+            rng = f" <= {hi}"
+        else:
+            rng = ""
+        return what + rng + (" or blank" if self.optional else "")
+
+
+def _settings() -> tuple[Setting, ...]:
+    d = MergeConfig()
+    p = d.pso
+    inf = math.inf
+    return (
+        Setting("theta", "theta", "float", -1, 1, d.theta,
+                "Pearson rho above which two unique poses agree (eq. 2)"),
+        Setting("unique_count", "unique poses", "int", 1, 100000, d.unique_count,
+                "unique poses per robot (Algorithm 1); sets delta"),
+        Setting("delta", "delta", "float", 0, inf, None,
+                "fixed divergence threshold (m x beams); blank: from unique poses", optional=True),
+        Setting("sub_sec", "sub-section", "int", 1, 1000, d.sub_sec,
+                "half-width of Algorithm 1's sections (poses)"),
+        Setting("particles", "particles", "int", 1, 10000, p.particles, "PSO swarm size"),
+        Setting("iterations", "iterations", "int", 0, 100000, p.iterations, "PSO iterations (at most)"),
+        Setting("w", "w", "float", 0, 10, p.w, "PSO inertia weight"),
+        Setting("c1", "c1", "float", 0, 10, p.c1, "PSO cognitive coefficient"),
+        Setting("c2", "c2", "float", 0, 10, p.c2, "PSO social coefficient"),
+        Setting("accept", "accept", "float", 0, 1, d.accept,
+                "least wall agreement for a map to be merged (fraction)"),
+        Setting("seed", "seed", "int", 0, 2**63 - 1, d.seed, "seed of every random step"),
+    )
+
+
+#: The numeric settings, in form order.
+SETTINGS = _settings()
+
+
+def parse_setting(s: Setting, text: str):
+    """The value of ``text`` for setting ``s``.
+
+    Raises
+    ------
+    InputError
+        When ``text`` is not allowed; the message names the setting and what it must be.
+    """
+    t = text.strip()
+    if not t:
+        if s.optional:
+            return None
+        raise InputError(f"{s.label}: is empty; type {s.allowed()} (default {s.default})")
+    try:
+        v = int(t) if s.kind == "int" else float(t)
+    except ValueError:
+        raise InputError(f"{s.label}: {t!r} is not {s.allowed()}") from None
+    if not math.isfinite(v) or not s.lo <= v <= s.hi:
+        raise InputError(f"{s.label}: {t} is out of range; type {s.allowed()}")
+    return v
+
+
+class _SettingValidator(Validator):
+    def __init__(self, setting: Setting) -> None:
+        super().__init__()
+        self.setting = setting
+
+    def validate(self, value: str) -> ValidationResult:
+        try:
+            parse_setting(self.setting, value)
+        except InputError as exc:
+            return self.failure(str(exc).split(": ", 1)[-1])
+        return self.success()
+
+
+def _default_text(s: Setting) -> str:
+    return "" if s.default is None else f"{s.default:g}" if isinstance(s.default, float) else str(s.default)
+
+
+class SettingsForm(VerticalScroll):
+    """Every merge setting with its default; invalid values are flagged as they are typed."""
+
+    DEFAULT_CSS = """
+    SettingsForm {
+        height: 1fr;
+        padding: 0 1;
+    }
+    SettingsForm > Grid {
+        grid-size: 3;
+        grid-columns: 14 12 1fr;
+        grid-rows: 1;
+        grid-gutter: 0 1;
+        height: auto;
+    }
+    SettingsForm Label {
+        width: 100%;
+        text-align: right;
+        color: $text-muted;
+    }
+    SettingsForm Input {
+        width: 100%;
+    }
+    SettingsForm Input.-invalid {
+        background: $error 35%;
+    }
+    SettingsForm Select {
+        width: 100%;
+    }
+    SettingsForm .hint {
+        color: $text-muted;
+        width: 100%;
+        height: 1;
+        text-wrap: nowrap;
+        text-overflow: ellipsis;
+    }
+    SettingsForm .hint.-invalid {
+        color: $text-error;
+        text-style: bold;
+    }
+    SettingsForm #settings-note {
+        margin-top: 1;
+        color: $text-muted;
+        height: auto;
+    }
+    """
+
+    def compose(self) -> ComposeResult:
+        with Grid():
+            yield Label("method")
+            yield Select([(m, m) for m in METHODS], value=MergeConfig().method, allow_blank=False,
+                         compact=True, id="method")
+            yield Static("DFT unique poses + Pearson pairing + PSO", classes="hint")
+            for s in SETTINGS:
+                yield Label(s.label)
+                yield Input(_default_text(s), id=f"set-{s.key}", compact=True, valid_empty=s.optional,
+                            validators=[_SettingValidator(s)], select_on_focus=False)
+                default = "blank" if s.default is None else _default_text(s)
+                yield Static(f"{s.help} (default {default})", id=f"hint-{s.key}", classes="hint")
+        yield Static("tab / shift+tab move between fields; invalid values are shown in red and "
+                     "block the run.", id="settings-note")
+
+    def _hint(self, s: Setting, failure: str | None) -> None:
+        hint = self.query_one(f"#hint-{s.key}", Static)
+        default = "blank" if s.default is None else _default_text(s)
+        if failure:
+            hint.update(Text(f"{failure}", style=""))
+            hint.add_class("-invalid")
+        else:
+            hint.update(f"{s.help} (default {default})")
+            hint.remove_class("-invalid")
+
+    @on(Input.Changed)
+    def _on_changed(self, event: Input.Changed) -> None:
+        key = (event.input.id or "").removeprefix("set-")
+        for s in SETTINGS:
+            if s.key == key:
+                v = event.validation_result
+                self._hint(s, None if v is None or v.is_valid else "; ".join(v.failure_descriptions))
+                return
+
+    def set_value(self, key: str, text: str) -> None:
+        """Type ``text`` into the field of setting ``key`` (validated like keyboard input)."""
+        self.query_one(f"#set-{key}", Input).value = text
+
+    def values(self) -> dict:
+        """The settings as ``{key: value}`` (plus ``method``).
+
+        Raises
+        ------
+        InputError
+            For the first field that holds an invalid value.
+        """
+        out = {"method": self.query_one("#method", Select).value}
+        for s in SETTINGS:
+            out[s.key] = parse_setting(s, self.query_one(f"#set-{s.key}", Input).value)
+        return out
+
+    def config(self, reference: int = 0) -> MergeConfig:
+        """The :class:`MergeConfig` the form describes, with map ``reference`` as the reference.
+
+        Raises
+        ------
+        InputError
+            An invalid field (named in the message) or a combination the pipeline refuses.
+        """
+        v = self.values()
+        cfg = MergeConfig(method=v["method"], theta=v["theta"], unique_count=v["unique_count"],
+                          delta=v["delta"], sub_sec=v["sub_sec"], accept=v["accept"],
+                          reference=reference, seed=v["seed"])
+        return cfg.with_pso(particles=v["particles"], iterations=v["iterations"], w=v["w"],
+                            c1=v["c1"], c2=v["c2"])
