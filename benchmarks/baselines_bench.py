@@ -98,11 +98,11 @@ def main(argv=None) -> int:
     print(f"\n{n} crop pairs (>= 50% overlap, random rotation), success = within "
           f"{args.degrees:g} deg and {args.cells:g} cells; {n} unrelated pairs")
     print(f"{'method':16s} {'success':>9s} {'accepted':>9s} {'acc.wrong':>9s} {'false acc':>9s} "
-          f"{'s/pair':>7s}  score(correct) min/median  score(unrelated) median/max")
+          f"{'s/estim.':>8s}  score(correct) min/median  score(unrelated) median/max")
     for m, r in rows.items():
         co, cf = r["conf_ok"], r["conf_false"]
         print(f"{m:16s} {r['ok']:4d}/{n:<4d} {r['acc']:4d}/{n:<4d} {r['acc_wrong']:4d}/{n:<4d} "
-              f"{r['false_acc']:4d}/{n:<4d} {statistics.mean(r['t']):7.3f}  "
+              f"{r['false_acc']:4d}/{n:<4d} {statistics.mean(r['t']):8.3f}  "
               f"{(min(co) if co else float('nan')):.3f}/{(statistics.median(co) if co else float('nan')):.3f}"
               f"              {statistics.median(cf):.3f}/{max(cf):.3f}")
     print("\nsuccess per map:")

@@ -208,7 +208,7 @@ class BagExport:
     duration_s: float
 
 
-# -- small helpers ----------------------------------------------------------------------------------
+# -- frames, stamps and pose algebra --------------------------------------------------------------
 
 def _frame(name) -> str:
     """A frame id without the leading '/' ROS 1 allowed."""

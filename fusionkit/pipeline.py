@@ -22,6 +22,7 @@ import numpy as np
 
 from .alignment import (Alignment, AlignmentConfig, align_points, mask_points, overlap_score,
                         refine_points, seed_transforms)
+from .consensus import ConsensusConfig
 from .errors import FusionkitError, InputError
 from .fusion import FusedMap, fuse_maps
 from .grid import OccupancyGrid
@@ -35,8 +36,11 @@ from .unique_poses import UniquePoses, find_unique_poses
 __all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MergeStep", "MergeResult", "MergeCancelled",
            "merge", "METHODS", "load_inputs"]
 
-#: Method names accepted by :func:`merge` and ``fusionkit merge --method``.
-METHODS = ("spectral-pso",)
+#: Method names accepted by :func:`merge` and ``fusionkit merge --method``: the paper's method,
+#: the consensus method (:mod:`fusionkit.consensus`) and the classic peers
+#: (:mod:`fusionkit.baselines`; ``map-merge-shipped`` chains 3+ maps in the order OpenCV does).
+METHODS = ("spectral-pso", "consensus", "map-merge", "map-merge-shipped", "hough-spectrum",
+           "fourier-mellin")
 
 
 class MergeCancelled(FusionkitError):
@@ -50,7 +54,10 @@ class MergeConfig:
     Attributes
     ----------
     method : str
-        ``"spectral-pso"``: the paper's method.
+        ``"spectral-pso"``: the paper's method; ``"consensus"``: verified hypotheses from scans
+        and walls, kept consistent over all maps (:mod:`fusionkit.consensus`); ``"map-merge"``,
+        ``"map-merge-shipped"``, ``"hough-spectrum"``, ``"fourier-mellin"``: the classic peers
+        (:mod:`fusionkit.baselines`). The settings below are the paper's method's unless noted.
     sub_sec : int
         Half-width of Algorithm 1's sections (poses).
     delta : float or None
@@ -74,6 +81,8 @@ class MergeConfig:
         Index of the reference map (its frame is the merged frame).
     seed : int
         Seed of every random step.
+    consensus : ConsensusConfig or None
+        Settings of the ``"consensus"`` method (None: its defaults).
     """
 
     method: str = "spectral-pso"
@@ -88,6 +97,7 @@ class MergeConfig:
     virtual_poses: int = 1500
     reference: int = 0
     seed: int = 0
+    consensus: ConsensusConfig | None = None
 
     def __post_init__(self):
         if self.method not in METHODS:
@@ -302,6 +312,10 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     def emit(ev: MergeEvent):
         if callback is not None and callback(ev):
             raise MergeCancelled("merge cancelled")
+
+    if config.method != "spectral-pso":
+        from .consensus._merge import merge_with
+        return merge_with(config.method, grids, scans, names, config, emit, t_start)
 
     # 1. scans: recorded, or cast virtually in the map's free space
     t0 = time.perf_counter()

@@ -118,8 +118,9 @@ class ScanLog:
         ranges = self.ranges if index is None else self.ranges[index]
         ang = poses[:, 2:3] + self.beam_angles[None, :]
         hit = np.isfinite(ranges) & (ranges <= self.range_max)
-        x = poses[:, 0:1] + ranges * np.cos(ang)
-        y = poses[:, 1:2] + ranges * np.sin(ang)
+        r = np.where(hit, ranges, 0.0)
+        x = poses[:, 0:1] + r * np.cos(ang)
+        y = poses[:, 1:2] + r * np.sin(ang)
         return np.stack([x[hit], y[hit]], axis=-1)
 
 

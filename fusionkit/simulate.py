@@ -17,9 +17,11 @@ Motion
     unknown cell is not taken.
 
 Sensor
-    Beams are cast through the world with an exact grid traversal (Amanatides & Woo; occupied
-    cells return the beam, unknown cells swallow it), gaussian range noise is added and beams
-    without a return (or longer than ``max_range``) are ``inf``, as in ``sensor_msgs/LaserScan``.
+    Beams are cast through the world with an exact grid traversal (Amanatides & Woo): occupied
+    cells return the beam, free and unknown cells let it pass (in a real map, unknown cells are
+    mostly grey fringes of walls and unobserved floor; robots never drive into them). Gaussian
+    range noise is added, and beams without a return within ``max_range`` are ``inf``, as in
+    ``sensor_msgs/LaserScan``.
 
 Odometry drift
     With ``drift_xy``/``drift_theta`` > 0 each step's odometry increment gets gaussian errors
@@ -558,8 +560,8 @@ def _walk_all(nav, goals, starts, step, max_turn, turn_noise, look, reach, wande
 # Sensor
 # ---------------------------------------------------------------------------------------------
 def _blocked(world: OccupancyGrid) -> np.ndarray:
-    """0 open, 1 returns the beam (occupied), 2 swallows it (unknown)."""
-    return np.where(world.occupied_mask(), 1, np.where(world.known_mask(), 0, 2)).astype(np.uint8)
+    """1 where a cell returns the beam (occupied), 0 where the beam passes (free, unknown)."""
+    return world.occupied_mask().astype(np.uint8)
 
 
 def _cast(world, blocked, poses_world, lidar: LidarConfig, noise) -> np.ndarray:
@@ -583,7 +585,7 @@ def cast_scans(world: OccupancyGrid, poses, lidar: LidarConfig = LidarConfig(), 
     Parameters
     ----------
     world : OccupancyGrid
-        Occupied cells return beams, unknown cells swallow them, free cells let them pass.
+        Occupied cells return beams; free and unknown cells let them pass.
     poses : (N, 3) array
         Sensor poses x, y (m), theta (rad) in the world's map frame.
     lidar : LidarConfig

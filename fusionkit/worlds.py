@@ -309,7 +309,7 @@ def make_warehouse(seed: int = 0, size=DEFAULT_SIZE, resolution: float = DEFAULT
     cv.carve(x0, y0, x1, y1)
 
     dock = float(rng.uniform(4.5, 6.0))  # open loading area along the bottom wall
-    office_w = min(7.0, (x1 - x0) * 0.25)
+    office_w = min(7.0, max(5.0, (x1 - x0) * 0.25))
     office_h = min(dock - 0.5, 4.0)
     # small office in the lower-left corner: two rooms with doors to the hall
     ox1 = x0 + office_w
@@ -320,7 +320,7 @@ def make_warehouse(seed: int = 0, size=DEFAULT_SIZE, resolution: float = DEFAULT
     cv.fill(mid, y0, mid + w, oy1)
     for ra, rb in ((x0, mid), (mid + w, ox1)):
         dw = float(rng.uniform(0.9, 1.2))
-        dx = float(rng.uniform(ra + 0.3, rb - 0.3 - dw))
+        dx = float(rng.uniform(ra + 0.3, max(ra + 0.3, rb - 0.3 - dw)))
         cv.carve(dx, oy1 - 0.05, dx + dw, oy1 + w + 0.05)
     # pallets and pillars in the loading area (right of the office)
     px = ox1 + 1.5

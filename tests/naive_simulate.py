@@ -11,21 +11,17 @@ import numpy as np
 
 def slab_ranges(world, poses, angles, max_range):
     """Exact ranges (m) of beams from world-frame ``poses`` (N, 3) at ``angles`` (B,) (rad)
-    through ``world``: distance to the entry point of the nearest occupied cell; ``inf`` when the
-    nearest blocking cell is unknown (it swallows the beam), when it is beyond ``max_range``, or
-    when there is none. Returns (N, B) float64."""
+    through ``world``: distance to the entry point of the nearest occupied cell; ``inf`` when it
+    is beyond ``max_range`` or there is none. Returns (N, B) float64."""
     res = world.resolution
     local = world.origin_transform.inverse.apply_pose(np.asarray(poses, float))
-    occ = world.occupied_mask()
-    unknown = ~world.known_mask()
-    rr, cc = np.nonzero(occ | unknown)
-    returns = occ[rr, cc]
+    rr, cc = np.nonzero(world.occupied_mask())
     max_cells = max_range / res
     out = np.full((len(local), len(angles)), np.inf)
     for i, (x, y, th) in enumerate(local):
         px, py = x / res, y / res
         near = np.hypot(cc + 0.5 - px, rr + 0.5 - py) <= max_cells + 1.0
-        c0, r0, ret = cc[near].astype(float), rr[near].astype(float), returns[near]
+        c0, r0 = cc[near].astype(float), rr[near].astype(float)
         a = th + np.asarray(angles, float)
         dx, dy = np.cos(a)[:, None], np.sin(a)[:, None]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -38,6 +34,6 @@ def slab_ranges(world, poses, angles, max_range):
             continue
         j = np.argmin(t, axis=1)
         best = t[np.arange(len(a)), j]
-        ok = np.isfinite(best) & (best <= max_cells) & ret[j]
+        ok = np.isfinite(best) & (best <= max_cells)
         out[i] = np.where(ok, best * res, np.inf)
     return out

@@ -263,10 +263,31 @@ def test_shipped_chaining_misplaces_maps_two_edges_from_the_centre(chain):
 
 
 def _opencv_pairwise(grids):
+    """OpenCV's own features and pairwise matches, and the same as this module's pairs."""
     finder = cv2.AKAZE_create()
     feats = [cv2.detail.computeImageFeatures2(finder, map_merge.grid_image(g)) for g in grids]
     pm = cv2.detail_AffineBestOf2NearestMatcher(False, False, 0.3, 6).apply2(feats)
-    return feats, pm
+    n = len(grids)
+    pairs = {}
+    for i in range(n):
+        for j in range(n):
+            p = pm[i * n + j]
+            if i == j:
+                pairs[i, j] = map_merge._Pair()
+                continue
+            m = np.array([(d.queryIdx, d.trainIdx) for d in p.getMatches()], np.int64).reshape(-1, 2)
+            inliers = np.array(p.getInliers(), bool).ravel() if len(m) else np.zeros(0, bool)
+            pairs[i, j] = map_merge._Pair(None if p.H is None else np.asarray(p.H, float), m, inliers,
+                                          int(p.num_inliers), float(p.confidence))
+    mine = [map_merge._Features(np.array([k.pt for k in f.keypoints], np.float32), None) for f in feats]
+    return feats, pm, pairs, mine
+
+
+def _unique_tree(pairs, n):
+    weights = sorted((pairs[i, j].num_inliers for i in range(n) for j in range(i + 1, n)
+                      if pairs[i, j].H is not None), reverse=True)
+    # the n - 1 strongest pairs are untied and stronger than the rest: one spanning tree only
+    return len(set(weights[:n - 1])) == n - 1 and weights[n - 2] > weights[n - 1]
 
 
 def test_spanning_tree_and_shipped_chaining_match_opencv(chain):
@@ -274,18 +295,9 @@ def test_spanning_tree_and_shipped_chaining_match_opencv(chain):
     reproduce ``cv2.detail.AffineBasedEstimator``; the component matches
     ``leaveBiggestComponent``."""
     grids, _ = chain
-    feats, pm = _opencv_pairwise(grids)
+    feats, pm, pairs, _ = _opencv_pairwise(grids)
     n = len(grids)
-    pairs = {(i, j): map_merge._Pair(H=None if pm[i * n + j].H is None else np.asarray(pm[i * n + j].H, float),
-                                      num_inliers=int(pm[i * n + j].num_inliers),
-                                      confidence=float(pm[i * n + j].confidence))
-             for i in range(n) for j in range(n)}
-    for i in range(n):
-        pairs[i, i] = map_merge._Pair()
-    weights = sorted((pairs[i, j].num_inliers for i in range(n) for j in range(i + 1, n)
-                      if pairs[i, j].H is not None), reverse=True)
-    # the n - 1 strongest pairs are untied and stronger than the rest: one spanning tree only
-    assert len(set(weights[:n - 1])) == n - 1 and weights[n - 2] > weights[n - 1]
+    assert _unique_tree(pairs, n)
     conf = np.array([[pairs[i, j].confidence for j in range(n)] for i in range(n)])
     for thr in (0.3, 1.0, 1.5):
         assert map_merge._biggest_component(conf, thr) == list(cv2.detail.leaveBiggestComponent(feats, pm, thr))
@@ -294,6 +306,57 @@ def test_spanning_tree_and_shipped_chaining_match_opencv(chain):
     mine, _, _ = map_merge._chain(pairs, n, shipped=True)
     for k in range(n):
         np.testing.assert_allclose(mine[k], cams[k].R, atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def loop(intel):
+    """Four windows that all overlap one another (every pair confident): a graph with loops."""
+    rng = np.random.default_rng(4)
+    data, res, size = intel.trinary(), intel.resolution, 220
+    grids, to_world = [], []
+    for r0, c0 in ((150, 40), (150, 110), (210, 75), (200, 140)):
+        src = OccupancyGrid(data[r0:r0 + size, c0:c0 + size], res, (res * c0, res * r0, 0.0))
+        t = Transform2D(*rng.uniform(-5, 5, 2), rng.uniform(-math.pi, math.pi))
+        side = int(size * 1.5)
+        centre = t.inverse(src.cell_to_world(size / 2, size / 2))
+        target = OccupancyGrid(np.full((side, side), -1, np.int8), res,
+                               (centre[0] - side * res / 2, centre[1] - side * res / 2, 0.0))
+        grids.append(resample(src, t.inverse, target))
+        to_world.append(t)
+    return grids, [to_world[0].inverse @ t for t in to_world]
+
+
+def test_shipped_bundle_adjustment_matches_opencv(loop):
+    grids, _ = loop
+    feats, pm, pairs, mine_feats = _opencv_pairwise(grids)
+    n = len(grids)
+    assert _unique_tree(pairs, n)
+    ok, cams = cv2.detail_AffineBasedEstimator().apply(feats, pm, None)
+    for c in cams:
+        c.R = c.R.astype(np.float32)
+    adjuster = cv2.detail_BundleAdjusterAffinePartial()
+    adjuster.setConfThresh(1.0)
+    ok, cams = adjuster.apply(feats, pm, cams)
+    assert ok
+    mine, centre, _ = map_merge._chain(pairs, n, shipped=True)
+    mine = map_merge._bundle_adjust(mine, mine_feats, pairs, 1.0, shipped=True)
+    inv_c = np.linalg.inv(mine[centre])
+    for k in range(n):
+        np.testing.assert_allclose(inv_c @ mine[k], np.asarray(cams[k].R, float), rtol=0, atol=2e-3)
+
+
+def test_corrected_bundle_adjustment_keeps_maps_in_place_where_shipped_does_not(loop):
+    grids, truth = loop
+    res = grids[0].resolution
+    fixed = map_merge.estimate_maps(grids, chaining="corrected")
+    assert np.all(fixed.pair_confidence[~np.eye(4, dtype=bool)] >= 1.0)
+    for k in range(4):
+        assert recovered(PairEstimate(fixed.transforms[k], 1.0, True), truth[k], grids[k], res), k
+    shipped = map_merge.estimate_maps(grids, chaining="shipped")
+    wrong = [k for k in range(4)
+             if not recovered(PairEstimate(shipped.transforms[k], 1.0, True), truth[k], grids[k], res)]
+    assert len(wrong) >= 2
+    assert max(abs(s - 1) for s in shipped.scales) > 0.05
 
 
 def test_maps_left_out_when_nothing_matches(chain):

@@ -184,6 +184,17 @@ def _crisp_fraction(grid) -> float:
     return float((nb[occ] > 0).mean())
 
 
+def test_orebro_scanner_error_codes_below_the_maximum_are_no_return():
+    c = read_carmen(REAL / "orebro.gfs.log")
+    s = c.stats
+    assert (s.scans, c.scans.n_beams) == (237, 181)
+    assert s.no_return_value == pytest.approx(32.767)
+    # 32.767 (463 readings), 32.765 (7), 32.763 (465), 32.759 (33): codes, not walls
+    assert s.no_return_readings == 463 + 7 + 465 + 33
+    r = c.scans.ranges[np.isfinite(c.scans.ranges)]
+    assert r.max() == pytest.approx(32.63) and c.scans.range_max == pytest.approx(32.63)
+
+
 def test_intel_log_imports_with_crisp_walls(tmp_path):
     res = import_carmen(INTEL, tmp_path)
     s = res.stats

@@ -69,17 +69,20 @@ def test_ray_caster_matches_slab_reference(world_fn, origin):
     np.testing.assert_allclose(fast[fin], slow[fin], atol=2e-5)
 
 
-def test_unknown_cells_swallow_beams():
+def test_only_occupied_cells_return_beams():
     data = np.zeros((40, 40), np.int8)
-    data[:, 30] = -1  # unknown wall to the east
+    data[:, 30] = -1  # unknown strip to the east, an occupied wall behind it
+    data[:, 35] = 100
     data[:, 5] = 100  # occupied wall to the west
     w = OccupancyGrid(data, 0.1)
     r = cast_scans(w, [[2.05, 2.0, 0.0], [2.05, 2.0, math.pi]], LidarConfig(beams=4, range_noise=0))
     # beams: -pi, -pi/2, 0, pi/2 (relative to the heading); the grid ends north and south
-    assert np.isinf(r[0, 2])  # east: unknown, no return
+    assert r[0, 2] == pytest.approx(3.5 - 2.05, abs=1e-5)  # east: through unknown to the wall
     assert r[0, 0] == pytest.approx(2.05 - 0.6, abs=1e-5)  # west: wall cell 5 ends at x = 0.6
-    assert np.isinf(r[0, 1]) and np.isinf(r[0, 3])
+    assert np.isinf(r[0, 1]) and np.isinf(r[0, 3])  # off the grid: no return
     assert r[1, 2] == pytest.approx(r[0, 0], abs=1e-6)
+    short = cast_scans(w, [[2.05, 2.0, 0.0]], LidarConfig(beams=4, max_range=1.4, range_noise=0))
+    assert np.isinf(short[0]).all()  # both walls beyond 1.4 m
 
 
 def test_range_noise_has_the_configured_spread(office):
@@ -153,6 +156,19 @@ def test_maps_agree_with_the_world(sim, office):
     cov = sim.coverage()
     assert all(0.05 < c < 1 for c in cov.per_robot)
     assert cov.combined >= max(cov.per_robot)
+
+
+def test_a_world_with_a_rotated_origin(office):
+    """Map frames whose grid is rotated (origin yaw) work the same way."""
+    w = OccupancyGrid(office.data, office.resolution, (-5.0, 3.0, 0.7), "rotated")
+    s = simulate(w, SimulationConfig(robots=1, poses=300, seed=2))
+    r = s.robots[0]
+    rows, cols = w.world_to_cell(r.trajectory[:, :2])
+    assert (w.data[np.floor(rows).astype(int), np.floor(cols).astype(int)] == 0).all()
+    placed = resample(r.grid, r.transform, w)
+    walls = ndimage.binary_dilation(w.occupied_mask(), np.ones((3, 3), bool))
+    occ = placed.occupied_mask()
+    assert occ.sum() > 300 and (occ & walls).sum() / occ.sum() >= 0.95
 
 
 def test_odometry_drift_bends_the_recorded_path(office):

@@ -37,8 +37,10 @@ What is not followed
 * The node re-centres the merged grid (its origin at minus half its size) and composes the
   grids by cell-wise maximum; those are output steps and are not reproduced here: transforms
   are returned in the frame of a chosen reference map instead.
-* ``chaining="corrected"`` composes the chain in the right order (see :func:`estimate_maps`);
-  ``chaining="shipped"`` reproduces the order OpenCV uses.
+* ``chaining="corrected"`` composes the chain and the bundle adjustment's prediction in the
+  right order (see :func:`estimate_maps`); ``chaining="shipped"`` reproduces OpenCV's order.
+* The bundle adjustment's Levenberg-Marquardt is SciPy's (MINPACK) instead of OpenCV's
+  ``CvLevMarq``; both reach the same minimum of the same residuals.
 
 References
 ----------
@@ -61,7 +63,7 @@ from ..grid import OccupancyGrid
 from ..transform import Transform2D
 from ._common import PairEstimate, Stopwatch, cell_to_map, make_options, prepare_pair
 
-__all__ = ["MapMergeOptions", "MapsEstimate", "estimate_pair", "estimate_maps", "METHOD"]
+__all__ = ["MapMergeOptions", "MapsEstimate", "estimate_pair", "estimate_maps", "grid_image", "METHOD"]
 
 METHOD = "map-merge"
 
@@ -416,8 +418,8 @@ class MapsEstimate:
         Per input map, the transform from its frame into the reference map's frame (m, rad);
         None for a map left out (not in the largest confidently matched component).
     confidences : tuple of float
-        Per input map, the best pair confidence it has with another kept map (0 when left out;
-        the reference gets its own best).
+        Per input map, the best confidence of its pairs with the other kept maps (0 for a map
+        left out).
     pair_confidence : (n, n) ndarray
         Every pair's confidence ``inliers / (8 + 0.3 matches)`` (symmetric, 0 on the diagonal).
     component : tuple of int
@@ -435,6 +437,8 @@ class MapsEstimate:
         Index of the map whose frame the transforms are in.
     seconds : float
         Wall-clock time (s).
+    diagnostics : dict
+        ``keypoints`` per map, ``matches`` and ``inliers`` per pair ``(i, j)``, ``i < j``.
     """
 
     transforms: tuple
@@ -460,10 +464,14 @@ def estimate_maps(grids, *, confidence: float = 1.0, chaining: str = "corrected"
     ``(i, j)`` must get ``R_j = H_ij R_i``; OpenCV's ``CalcAffineTransform`` computes
     ``R_j = R_i H_ij``. The two agree next to the centre (``R_i = I``) and whenever the motions
     commute (pure translations), so two maps always merge right, but a map two or more edges from
-    the centre is misplaced once rotations are involved. The bundle adjustment uses the same
-    order (``R_i^-1 R_j``), so the misplaced chain is a fixed point of it and it does not repair
-    the error. (m-explore issue #70 reports improper merging of robots that start with different
-    orientations; that report carries no diagnosis.)
+    the centre is misplaced once rotations are involved. The bundle adjustment predicts a match
+    of pair ``(i, j)`` by ``R_i^-1 R_j`` where ``R_j R_i^-1`` is right, so it is right only for
+    pairs that include the centre: when only the spanning tree's pairs are confident the
+    misplaced chain has zero residual and stays; when other pairs are confident too (loops) it
+    pulls maps away from their places, scale included, even maps next to the centre.
+    ``"corrected"`` uses the right order in both steps. (m-explore report #70,
+    "Improper merging when robots have different orientations", describes the symptom without a
+    diagnosis; this ordering is one cause that fits it.)
 
     Parameters
     ----------

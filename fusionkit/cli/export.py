@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import argparse
+import textwrap
 import time
 
 from ..io_rosbag import export_rosbag
 from ._common import Progress, float_range
 
 __all__ = ["register", "run_rosbag"]
+
+
+def _paragraphs(*paras: str) -> str:
+    """Help text of several paragraphs, each wrapped to 88 columns."""
+    return "\n\n".join(textwrap.fill(p, 88) for p in paras)
 
 
 def register(sub) -> None:
@@ -20,13 +26,14 @@ def register(sub) -> None:
     b = kinds.add_parser(
         "rosbag", help="a run directory (NAME.scans.npz + NAME.yaml per robot) as a ROS bag",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Write every robot of RUN_DIR (NAME.scans.npz, and NAME.yaml when present) "
-                    "as a ROS bag: per robot /NAME/scan (sensor_msgs/LaserScan, frame "
-                    "NAME/laser), /NAME/odom (nav_msgs/Odometry: the laser's pose in NAME/map), "
-                    "/NAME/map (nav_msgs/OccupancyGrid, once, latched) and the same pose on "
-                    "/tf. Scan i of every robot is stamped START + i / RATE seconds. The bag "
-                    "is written under a temporary name and renamed when complete; an existing "
-                    "output is never replaced.")
+        description=_paragraphs(
+            "Write every robot of RUN_DIR (NAME.scans.npz, and NAME.yaml when present) as a "
+            "ROS bag: per robot /NAME/scan (sensor_msgs/LaserScan, frame NAME/laser), "
+            "/NAME/odom (nav_msgs/Odometry: the laser's pose in NAME/map, zero twist), "
+            "/NAME/map (nav_msgs/OccupancyGrid, once, latched) and the same pose on /tf.",
+            "Scan i of every robot is stamped START + i / RATE seconds. The bag is written "
+            "under a temporary name and renamed when complete; an existing output is never "
+            "replaced. Exit status: 0 done, 2 bad input."))
     b.add_argument("run_dir", metavar="RUN_DIR", help="directory of a simulated run")
     b.add_argument("--out", metavar="BAG",
                    help="output bag: a .bag file for ros1, a directory for ros2 (default: "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import textwrap
 import time
 
 from ..io_carmen import CarmenConfig, import_carmen
@@ -10,6 +11,11 @@ from ..io_rosbag import PoseSource, import_rosbag
 from ._common import Progress, float_range, int_range
 
 __all__ = ["register", "run_carmen", "run_rosbag"]
+
+
+def _paragraphs(*paras: str) -> str:
+    """Help text of several paragraphs, each wrapped to 88 columns."""
+    return "\n\n".join(textwrap.fill(p, 88) for p in paras)
 
 _RES_HELP = "map cell size in metres (default: %(default)s)"
 
@@ -25,21 +31,22 @@ def register(sub) -> None:
     c = kinds.add_parser(
         "carmen", help="a CARMEN log (FLASER / ROBOTLASER1 records)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Read the FLASER and ROBOTLASER1 records of a CARMEN log (others, such as "
-                    "ODOM, NEFF, PARAM and comments, are skipped and counted) and write "
-                    "NAME.scans.npz, NAME.yaml and NAME.pgm in DIR.\n\n"
-                    "FLASER beams cover 180 degrees counter-clockwise from -90 degrees: an even "
-                    "count n in steps of 180/n degrees (180 beams: -90..+89), an odd count from "
-                    "-90 to +90 inclusive (181 beams). The scanner's maximum reading (the "
-                    "largest value when it repeats, e.g. 81.83 or 32.767 m) and error codes "
-                    "within 0.1% below it mean no return and are stored as inf; the scan "
-                    "log's range_max is --max-range, else the largest other reading capped at "
-                    "40 m. Scans are sorted by timestamp.\n\n"
-                    "--split K cuts the log into K consecutive sessions sharing --overlap of "
-                    "their length, written as robot_1..robot_K, each in its own start frame, "
-                    "with world.yaml/.pgm (the whole log in the log's frame) and truth.json "
-                    "(each robot's transform into the world frame), as 'fusionkit simulate' "
-                    "writes them.")
+        description=_paragraphs(
+            "Read the FLASER and ROBOTLASER1 records of a CARMEN log (others, such as ODOM, "
+            "NEFF, PARAM and comments, are skipped and counted) and write NAME.scans.npz, "
+            "NAME.yaml and NAME.pgm in DIR, the poses in the frame of the first scan.",
+            "FLASER beams cover 180 degrees counter-clockwise from -90 degrees: an even count n "
+            "in steps of 180/n degrees (180 beams: -90..+89), an odd count from -90 to +90 "
+            "inclusive (181 beams). The scanner's maximum reading (the largest value when it "
+            "repeats, e.g. 81.83 or 32.767 m) and error codes within 0.1% below it mean no "
+            "return and are stored as inf; the scan log's range_max is --max-range, else the "
+            "largest other reading capped at 40 m. Scans are sorted by timestamp (equal "
+            "timestamps keep the file order).",
+            "--split K cuts the log into K consecutive sessions sharing --overlap of their "
+            "length, written as robot_1..robot_K, each in its own start frame, with "
+            "world.yaml/.pgm (the whole log in the log's frame) and truth.json (each robot's "
+            "transform into the world frame), as 'fusionkit simulate' writes them. "
+            "Exit status: 0 done, 2 bad input."))
     c.add_argument("log", metavar="LOG", help="the CARMEN log file")
     c.add_argument("--out", required=True, metavar="DIR",
                    help="output directory (created if missing)")
@@ -68,16 +75,19 @@ def register(sub) -> None:
     b = kinds.add_parser(
         "rosbag", help="a ROS 1 .bag or ROS 2 bag directory (LaserScan + odometry or tf)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Read the sensor_msgs/LaserScan messages of --scan-topic from a ROS 1 .bag "
-                    "file or a ROS 2 bag directory (.db3 or .mcap) and pair each with the "
-                    "sensor pose at its stamp, from --odom-topic (nav_msgs/Odometry, "
-                    "PoseStamped or PoseWithCovarianceStamped; a fixed laser mounting on "
-                    "/tf_static is applied) or from the transform tree (--tf: the pose of the "
-                    "scan's frame, else of --base-frame, in --fixed-frame). Poses are "
-                    "interpolated between the bracketing samples (x, y linearly, the heading "
-                    "along the shorter arc); scans outside the poses' time span are dropped "
-                    "and counted. NaN readings and readings below range_min become inf (no "
-                    "return). Writes NAME.scans.npz, NAME.yaml and NAME.pgm in DIR.")
+        description=_paragraphs(
+            "Read the sensor_msgs/LaserScan messages of --scan-topic from a ROS 1 .bag file or "
+            "a ROS 2 bag directory (.db3 or .mcap) and pair each with the sensor pose at its "
+            "stamp, from --odom-topic (nav_msgs/Odometry, PoseStamped or "
+            "PoseWithCovarianceStamped; a fixed laser mounting on /tf_static is applied) or "
+            "from the transform tree (--tf: the pose of the scan's frame, else of "
+            "--base-frame, in --fixed-frame).",
+            "Poses are interpolated between the bracketing samples (x, y linearly, the heading "
+            "along the shorter arc); scans outside the poses' time span are dropped and "
+            "counted. Messages are sorted by header stamp. NaN readings and readings below "
+            "range_min become inf (no return).",
+            "Writes NAME.scans.npz, NAME.yaml and NAME.pgm in DIR. Exit status: 0 done, "
+            "2 bad input."))
     b.add_argument("bag", metavar="BAG", help="ROS 1 .bag file or ROS 2 bag directory")
     b.add_argument("--scan-topic", required=True, metavar="TOPIC",
                    help="the sensor_msgs/LaserScan topic, e.g. /scan")

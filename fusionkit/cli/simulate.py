@@ -28,7 +28,7 @@ def register(sub) -> None:
     w = p.add_mutually_exclusive_group()
     w.add_argument("--world", metavar="W.yaml", default=None,
                    help="ground-truth world as a ROS map_server map (occupied cells return beams, "
-                        "unknown cells swallow them, robots drive in free cells)")
+                        "free and unknown cells let them pass, robots drive in free cells)")
     w.add_argument("--world-kind", choices=list(WORLDS), default=None,
                    help="generate a world of this kind instead of loading one (default: office)")
     p.add_argument("--world-seed", type=int_range(0, 2**31 - 1), default=0, metavar="N",

@@ -43,8 +43,8 @@ class MapIndex:
         Centres (m) of the occupied cells, in the map frame.
     refine_points : (L, 2) float64
         An even subset of ``points`` (at most ``max_refine_points``) used by the refiners.
-    log : ScanLog
-        The scans (recorded or virtual).
+    log : ScanLog or None
+        The scans (recorded or virtual); None when the map is matched on its walls alone.
     virtual : bool
         Whether ``log`` was cast in the map rather than recorded.
     pose_index : (P,) int
@@ -65,7 +65,7 @@ class MapIndex:
     nearest: np.ndarray
     points: np.ndarray
     refine_points: np.ndarray
-    log: ScanLog
+    log: ScanLog | None
     virtual: bool
     pose_index: np.ndarray
     spectra: np.ndarray
@@ -97,15 +97,15 @@ def spread_indices(poses: np.ndarray, spacing: float, limit: int) -> np.ndarray:
     return idx
 
 
-def index_map(grid: OccupancyGrid, log: ScanLog, *, virtual: bool, pose_spacing: float,
+def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_spacing: float,
               max_poses: int, max_refine_points: int, clear_cells: int = 3) -> MapIndex:
     """Precompute a :class:`MapIndex` for ``grid`` and its scans ``log``.
 
     Parameters
     ----------
     grid : OccupancyGrid
-    log : ScanLog
-        The map's scans, in its frame.
+    log : ScanLog or None
+        The map's scans, in its frame (None: no scans are matched).
     virtual : bool
         Whether the scans are virtual.
     pose_spacing : float
@@ -137,6 +137,10 @@ def index_map(grid: OccupancyGrid, log: ScanLog, *, virtual: bool, pose_spacing:
         refine = points[(np.arange(max_refine_points) * step).astype(np.int64)]
     else:
         refine = points
+    if log is None or log.n_scans == 0:
+        return MapIndex(tri, known, occupied, near, clear, dist, nearest, points,
+                        np.ascontiguousarray(refine), log, bool(virtual), np.zeros(0, np.int64),
+                        np.zeros((0, 0), np.float32), np.zeros((0, 0), np.complex64))
     idx = spread_indices(log.poses, pose_spacing, max_poses)
     ranges = log.clipped_ranges()[idx].astype(np.float64)
     spec = scan_spectra(ranges, dc=False)                      # eq. 1 without the DC bin
@@ -148,14 +152,3 @@ def index_map(grid: OccupancyGrid, log: ScanLog, *, virtual: bool, pose_spacing:
     rfft = np.fft.rfft(centred, axis=1).astype(np.complex64)
     return MapIndex(tri, known, occupied, near, clear, dist, nearest, points,
                     np.ascontiguousarray(refine), log, bool(virtual), idx, spec, rfft)
-
-
-def wall_count_within(index: MapIndex, points: np.ndarray) -> int:
-    """How many ``points`` (m, map frame) land on known cells of the map."""
-    ri, ci, inside = index.cells(points)
-    return int(index.known[ri[inside], ci[inside]].sum())
-
-
-def heading_of(angle: float) -> float:
-    """``angle`` wrapped to ``[-pi, pi)``."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi

@@ -98,10 +98,12 @@ def _pool(mask: np.ndarray, f: int, how: str) -> np.ndarray:
     return blocks.any(axis=(1, 3)) if how == "any" else blocks.all(axis=(1, 3))
 
 
-def evidence_raster(index: MapIndex, *, coarse: float = 0.1, penalty: float = 1.0,
-                    sigma: float = 1.0) -> EvidenceRaster:
-    """Build A's evidence raster at about ``coarse`` m per cell (a whole number of A's cells)."""
-    f = max(1, int(round(coarse / index.resolution)))
+def evidence_raster(index: MapIndex, *, coarse: float = 0.1, max_side: int = 256,
+                    penalty: float = 1.0, sigma: float = 1.0) -> EvidenceRaster:
+    """Build A's evidence raster at about ``coarse`` m per cell (a whole number of A's cells),
+    coarser if needed to keep its longer side within ``max_side`` cells."""
+    f = max(1, int(round(coarse / index.resolution)),
+            int(math.ceil(max(index.occupied.shape) / max_side)))
     walls = _pool(index.occupied, f, "any").astype(np.float32)
     if sigma > 0:
         walls = ndimage.gaussian_filter(walls, sigma)

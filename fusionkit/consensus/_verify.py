@@ -1,21 +1,21 @@
-"""Refining a hypothesis on the whole maps and checking it.
+"""Refining a hypothesis on the whole maps, and checking it.
 
 Refiners
 --------
+* :func:`refine_icp`: iterative closest points on the grid. Each of B's wall points is paired
+  with the nearest wall cell of A (read off A's distance transform) when that is closer than a
+  gate, and the rigid motion that best fits the pairs (least squares, closed form) is applied;
+  the gate shrinks from 8 to 2 cells. A numba kernel does the whole loop.
 * :func:`refine_pso`: the paper's swarm (eq. 3's MSE between a softened raster of A's walls and
   B's wall points moved by eq. 4), started on the hypothesis and searching only a small box
   around it: a refiner, not a blind search.
-* :func:`refine_icp`: iterative closest points on the grid: each of B's wall points is paired
-  with the nearest wall cell of A (read from A's distance transform) when closer than a
-  shrinking gate, and the rigid motion that best fits the pairs (least squares, closed form) is
-  applied, until it stops moving.
 
 Verification
 ------------
-:func:`verify` moves each map's wall cells into the other and counts, on the other's known
-cells, those within one cell of a wall (agreement) and those on clear free space, at least
-three cells from any wall (conflict). A right placement agrees nearly everywhere both maps are
-known; a wrong one draws walls across the other map's open floor.
+:func:`verify` moves each map's wall cells into the other and counts, where the other map is
+known, those within one cell of one of its walls (agreement) and those on its clear free space,
+at least three cells from any wall (conflict). A right placement agrees nearly everywhere both
+maps are known; a wrong one draws walls across the other map's open floor.
 """
 
 from __future__ import annotations
@@ -25,12 +25,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._jit import njit
 from ..alignment import make_field, mse_cost
 from ..pso import PSOConfig, pso_minimize
 from ..transform import Transform2D
 from ._index import MapIndex
 
-__all__ = ["rigid_fit", "refine_icp", "refine_pso", "Check", "verify"]
+__all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_pso", "Check", "verify",
+           "DEFAULT_GATES"]
+
+#: Pairing distances (cells) of the ICP stages, each run until the motion settles.
+DEFAULT_GATES = (8.0, 5.0, 3.0, 2.0)
 
 
 def rigid_fit(src: np.ndarray, dst: np.ndarray) -> Transform2D:
@@ -44,29 +49,122 @@ def rigid_fit(src: np.ndarray, dst: np.ndarray) -> Transform2D:
     return Transform2D(md[0] - (c * ms[0] - sn * ms[1]), md[1] - (sn * ms[0] + c * ms[1]), th)
 
 
+@njit
+def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, gates, iterations, min_pairs, settle):
+    """ICP in A's cell frame (units: cells). ``pts`` are B's points already in cell units of a
+    frame aligned with A's cells; returns ``(tx, ty, th, pairs)`` of the final motion."""
+    rows, cols = dist.shape
+    n = pts.shape[0]
+    pairs = 0
+    for g in range(gates.shape[0]):
+        gate = gates[g]
+        for _ in range(iterations):
+            c = math.cos(th)
+            s = math.sin(th)
+            sx = 0.0
+            sy = 0.0
+            dx = 0.0
+            dy = 0.0
+            m = 0
+            # first pass: centroids of the paired points
+            for k in range(n):
+                x = c * pts[k, 0] - s * pts[k, 1] + tx
+                y = s * pts[k, 0] + c * pts[k, 1] + ty
+                ci = int(math.floor(x))
+                ri = int(math.floor(y))
+                if 0 <= ri < rows and 0 <= ci < cols and dist[ri, ci] <= gate:
+                    sx += pts[k, 0]
+                    sy += pts[k, 1]
+                    dx += near_c[ri, ci] + 0.5
+                    dy += near_r[ri, ci] + 0.5
+                    m += 1
+            pairs = m
+            if m < min_pairs:
+                return tx, ty, th, m
+            sx /= m
+            sy /= m
+            dx /= m
+            dy /= m
+            num = 0.0
+            den = 0.0
+            for k in range(n):
+                x = c * pts[k, 0] - s * pts[k, 1] + tx
+                y = s * pts[k, 0] + c * pts[k, 1] + ty
+                ci = int(math.floor(x))
+                ri = int(math.floor(y))
+                if 0 <= ri < rows and 0 <= ci < cols and dist[ri, ci] <= gate:
+                    px = pts[k, 0] - sx
+                    py = pts[k, 1] - sy
+                    qx = near_c[ri, ci] + 0.5 - dx
+                    qy = near_r[ri, ci] + 0.5 - dy
+                    num += px * qy - py * qx
+                    den += px * qx + py * qy
+            nth = math.atan2(num, den)
+            nc = math.cos(nth)
+            ns = math.sin(nth)
+            ntx = dx - (nc * sx - ns * sy)
+            nty = dy - (ns * sx + nc * sy)
+            moved = abs(ntx - tx) + abs(nty - ty)
+            turned = abs(math.atan2(math.sin(nth - th), math.cos(nth - th)))
+            tx, ty, th = ntx, nty, nth
+            if moved < settle and turned < 1e-4:
+                break
+    return tx, ty, th, pairs
+
+
+def _to_cells(a: MapIndex, t: Transform2D) -> Transform2D:
+    """``t`` (B map frame -> A map frame, m) as a motion into A's cell frame, in cells, for
+    points given in B's map frame divided by the resolution."""
+    local = a.grid.origin_transform.inverse @ t
+    res = a.resolution
+    return Transform2D(local.x / res, local.y / res, local.theta)
+
+
+def _from_cells(a: MapIndex, t: Transform2D) -> Transform2D:
+    res = a.resolution
+    return a.grid.origin_transform @ Transform2D(t.x * res, t.y * res, t.theta)
+
+
 def refine_icp(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
-               gates=(8.0, 5.0, 3.0, 2.0), iterations: int = 8) -> Transform2D:
+               gates=DEFAULT_GATES, iterations: int = 10) -> Transform2D:
     """Iterative closest points from ``start`` (B -> A) with pairs read off A's distance field.
 
-    ``gates`` are the successive pairing distances (cells), each used for up to ``iterations``
-    steps (fewer when the motion stops changing).
+    Parameters
+    ----------
+    a : MapIndex
+        The reference map.
+    points_b : (K, 2) float
+        B's wall points (m, B's frame).
+    start : Transform2D
+        Initial transform B -> A.
+    gates : sequence of float
+        Successive pairing distances (cells of A), each used for up to ``iterations`` steps
+        (fewer when the motion settles below a twentieth of a cell).
     """
+    if len(points_b) == 0:
+        return start
+    c = _to_cells(a, start)
+    pts = np.ascontiguousarray(points_b / a.resolution, np.float64)
+    tx, ty, th, _ = _icp_kernel(pts, c.x, c.y, c.theta, a.dist, a.nearest[0], a.nearest[1],
+                                np.asarray(gates, np.float64), int(iterations), 10, 0.05)
+    return _from_cells(a, Transform2D(tx, ty, th))
+
+
+def refine_icp_numpy(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
+                     gates=DEFAULT_GATES, iterations: int = 10) -> Transform2D:
+    """The same refinement written plainly in numpy (the reference the kernel is tested
+    against)."""
     t = start
     res = a.resolution
     for gate in gates:
         for _ in range(iterations):
-            q = t(points_b)
-            ri, ci, inside = a.cells(q)
-            ri, ci = ri[inside], ci[inside]
-            src = points_b[inside]
-            d = a.dist[ri, ci]
-            ok = d <= gate
+            ri, ci, inside = a.cells(t(points_b))
+            ok = np.zeros(len(points_b), bool)
+            ok[inside] = a.dist[ri[inside], ci[inside]] <= gate
             if ok.sum() < 10:
                 return t
-            nr = a.nearest[0, ri[ok], ci[ok]]
-            nc = a.nearest[1, ri[ok], ci[ok]]
-            dst = a.grid.cell_to_world(nr, nc)
-            new = rigid_fit(src[ok], dst)
+            dst = a.grid.cell_to_world(a.nearest[0, ri[ok], ci[ok]], a.nearest[1, ri[ok], ci[ok]])
+            new = rigid_fit(points_b[ok], dst)
             dt, dr = new.error_to(t)
             t = new
             if dt < 0.05 * res and dr < 1e-4:
@@ -79,8 +177,8 @@ def refine_pso(a_points: np.ndarray, points_b: np.ndarray, start: Transform2D, r
                config: PSOConfig = PSOConfig(particles=24, iterations=30, patience=8),
                seed=0, field=None) -> Transform2D:
     """The swarm of eq. 3 in a box of ``+-half_width`` m and ``+-half_angle`` rad around
-    ``start``. The box is expressed in eq. 4's ``(dx, dy, dphi)``; ``field`` may pass a
-    prebuilt softened raster of ``a_points``."""
+    ``start`` (expressed in eq. 4's ``(dx, dy, dphi)``); ``field`` may pass a prebuilt
+    softened raster of ``a_points`` (:func:`~fusionkit.alignment.make_field`)."""
     fld = field if field is not None else make_field(a_points, resolution, sigma=1.0)
     dx, dy, dphi = start.to_paper()
     bounds = np.array([[dx - half_width, dx + half_width], [dy - half_width, dy + half_width],
@@ -101,12 +199,12 @@ class Check:
     Attributes
     ----------
     score : float
-        The smaller of the two directions' agreement fractions (of a map's wall cells landing on
-        the other's known cells, the fraction within one cell of the other's walls).
+        The smaller of the two directions' agreement fractions: of one map's wall cells that land
+        where the other map is known, the fraction within one cell of the other's walls.
     agree_ab, agree_ba : float
-        Those fractions for B's walls in A and A's walls in B.
+        Those fractions for B's walls in A and for A's walls in B.
     overlap : int
-        The smaller of the two counts of wall cells landing on the other's known cells.
+        The smaller of the two counts of wall cells landing where the other map is known.
     conflicts : int
         Wall cells (both directions) on the other map's clear free space.
     conflict_fraction : float
@@ -127,15 +225,13 @@ class Check:
 
 
 def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D) -> tuple[int, int, int]:
-    """(on A's known cells or beside its walls, beside A's walls, on A's clear free space)
-    for B's walls moved by t."""
+    """For B's walls moved by ``t``: how many land on A's known cells (or beside A's walls),
+    how many beside A's walls, how many on A's clear free space."""
     ri, ci, inside = a.cells(t(points_b))
     ri, ci = ri[inside], ci[inside]
-    near_cells = a.near[ri, ci]
-    n = int((a.known[ri, ci] | near_cells).sum())
-    near = int(near_cells.sum())
-    bad = int(a.clear[ri, ci].sum())
-    return n, near, bad
+    near = a.near[ri, ci]
+    n = int((a.known[ri, ci] | near).sum())
+    return n, int(near.sum()), int(a.clear[ri, ci].sum())
 
 
 def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:

@@ -1,0 +1,32 @@
+"""``fusionkit tui``: the operator's terminal UI (pick maps, run and watch the merge, export)."""
+
+from __future__ import annotations
+
+from ..errors import InputError
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "tui", help="terminal UI: pick robot maps, watch the PSO converge, export the merged map",
+        description="Fuse robot maps interactively in the terminal (works over SSH at 80x24). "
+                    "Browse to the maps, select two or more, adjust the settings, run the merge "
+                    "and watch each alignment's PSO converge, inspect the fused map, each map's "
+                    "transform and confidence (and the paper's Table 1 metrics when a truth.json "
+                    "stands beside the maps), and export the merged map (YAML + PGM) with its "
+                    "report. Press ? inside for the keys. Set NO_COLOR to draw maps without colour.")
+    p.add_argument("paths", nargs="*", metavar="DIR or MAP.yaml",
+                   help="a directory to open with its robot maps selected (a simulated run, for "
+                        "instance), or map YAML files to select; default: browse the current "
+                        "directory with nothing selected")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    try:
+        from fusionkit_tui import make_app
+    except ImportError as exc:  # the UI package ships beside fusionkit; say what is missing
+        raise InputError(f"the terminal UI cannot start ({exc}); reinstall fusionkit with its "
+                         f"dependencies (textual, textual-plotext)") from None
+    app = make_app(args.paths)
+    app.run()
+    return int(app.return_code or 0)

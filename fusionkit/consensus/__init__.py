@@ -1,0 +1,171 @@
+"""The consensus method: many hypotheses, each verified on the whole maps, kept consistent
+over all maps, and a refusal when it is not sure.
+
+For every pair of maps, candidate placements come from two independent sources:
+
+* **scans** (when the maps come with recorded scans): every scan of one map is matched to every
+  scan of the other by Pearson's rho of their DC-free ``|DFT|`` spectra (the paper's eqs. 1-2,
+  over all poses, not only Algorithm 1's unique ones); each match gives a hypothesis (heading
+  from the circular cross-correlation of the two scans, translation from the two poses), and the
+  hypotheses are clustered (:mod:`._hypotheses`);
+* **walls**: rotations from the correlation of the maps' wall-direction histograms, and for each
+  the translations that put the most walls on walls and the fewest on open floor, by FFT
+  correlation (:mod:`._search`).
+
+Each candidate is refined on the full maps' walls (ICP on the distance field, optionally the
+paper's PSO of eq. 3 in a small box) and verified both ways (:func:`verify`): the fraction of
+each map's walls, where the other map is known, that lie within one cell of the other's walls,
+and the walls drawn on the other's clear free space. A pair is accepted when its best placement
+passes the thresholds and no distinct placement comes close; when several fit (repetitive
+buildings), loops through third maps decide. The placements are chained over a maximum
+spanning tree by confidence and every two placed maps are cross-checked (:mod:`._graph`).
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+from ..errors import InputError
+from ..grid import OccupancyGrid
+from ..scanlog import ScanLog
+from ._graph import GraphResult, solve_graph
+from ._index import MapIndex, index_map
+from ._pair import Candidate, ConsensusConfig, PairResult, corners, estimate_indexed
+from ._search import evidence_raster, orientation_histogram
+from ._verify import Check, refine_icp, refine_pso, verify
+
+__all__ = ["ConsensusConfig", "Check", "Candidate", "PairResult", "GraphResult", "MapsResult",
+           "MapIndex", "prepare_maps", "estimate_pair", "estimate_maps", "verify", "refine_icp",
+           "refine_pso", "METHOD"]
+
+METHOD = "consensus"
+
+
+def prepare_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None] | None = None, *,
+                 config: ConsensusConfig = ConsensusConfig(), virtual_poses: int = 1500,
+                 seed: int = 0) -> list[MapIndex]:
+    """One :class:`MapIndex` per map (virtual scans are cast only with ``config.virtual_scans``)."""
+    grids = list(grids)
+    scans = list(scans) if scans is not None else [None] * len(grids)
+    if len(scans) != len(grids):
+        raise InputError(f"{len(scans)} scan logs for {len(grids)} maps: give one per map (None for none)")
+    out = []
+    for k, (g, s) in enumerate(zip(grids, scans)):
+        if not isinstance(g, OccupancyGrid):
+            raise InputError(f"map {k} is a {type(g).__name__}, not an OccupancyGrid")
+        virtual = False
+        if s is None or not config.use_scans:
+            s = None
+            if config.use_scans and config.virtual_scans and g.free_mask().any():
+                from ..virtual_scans import virtual_scans
+                s = virtual_scans(g, n_poses=virtual_poses, seed=seed + k)
+                virtual = True
+        out.append(index_map(g, s, virtual=virtual, pose_spacing=config.pose_spacing,
+                             max_poses=config.max_poses, max_refine_points=config.max_refine_points))
+    if len({round(i.resolution, 12) for i in out}) > 1:
+        raise InputError("the maps have different resolutions; resample them to one first")
+    return out
+
+
+def _pair(indexes, hists, evidence, cfg, i, j, seed) -> PairResult:
+    return estimate_indexed(indexes[i], indexes[j], cfg, hist_a=hists[i], hist_b=hists[j],
+                            evidence_a=evidence[i], ia=i, ib=j, seed=seed)
+
+
+def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None = None,
+                  scans_b: ScanLog | None = None, config: ConsensusConfig = ConsensusConfig(),
+                  seed: int = 0):
+    """Place map ``b`` in map ``a``'s frame.
+
+    Returns
+    -------
+    fusionkit.baselines.PairEstimate
+        ``transform`` maps b's frame into a's (m, rad), ``confidence`` is the verification
+        score (0..1), ``accepted`` whether it passed; ``candidates`` lists every distinct
+        placement that passed the thresholds; ``diagnostics["pair"]`` is the
+        :class:`PairResult`.
+    """
+    from ..baselines import PairEstimate
+    t0 = time.perf_counter()
+    ia, ib = prepare_maps([a, b], [scans_a, scans_b], config=config, seed=seed)
+    pr = estimate_indexed(ia, ib, config, hist_a=orientation_histogram(ia),
+                          hist_b=orientation_histogram(ib),
+                          evidence_a=evidence_raster(ia, coarse=config.coarse), seed=seed)
+    return PairEstimate(pr.transform, pr.confidence, pr.accepted,
+                        tuple((c.transform, c.check.score) for c in pr.plausible) or
+                        (((pr.transform, pr.confidence),) if pr.transform is not None else ()),
+                        METHOD, time.perf_counter() - t0, {"pair": pr, "reason": pr.reason})
+
+
+@dataclass(frozen=True, eq=False)
+class MapsResult:
+    """Result of :func:`estimate_maps`: the per-pair results, the placement of every map and
+    the indexes built (``seconds`` per stage)."""
+
+    pairs: dict
+    graph: GraphResult
+    indexes: tuple
+    seconds: dict = field(default_factory=dict)
+
+    @property
+    def transforms(self) -> tuple:
+        return self.graph.transforms
+
+
+def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None] | None = None, *,
+                  config: ConsensusConfig = ConsensusConfig(), reference: int = 0, seed: int = 0,
+                  virtual_poses: int = 1500,
+                  callback: Callable[[str, int, int, tuple | None], None] | None = None) -> MapsResult:
+    """Place every map in the reference map's frame (or leave it out when not sure).
+
+    Parameters
+    ----------
+    grids : sequence of OccupancyGrid
+        Two or more maps of one resolution.
+    scans : sequence of ScanLog or None, optional
+        Recorded scans per map (None where a map has none).
+    config : ConsensusConfig
+    reference : int
+        Index of the map whose frame the transforms are in.
+    seed : int
+        Seed of the random steps (virtual scans, the optional swarm polish).
+    callback : callable(stage, step, total, pair), optional
+        Called before each map is prepared (``"scans"``) and each pair is estimated
+        (``"align"``, with ``pair = (i, j)``).
+    """
+    grids = list(grids)
+    n = len(grids)
+    if n < 2:
+        raise InputError(f"merging needs at least two maps, got {n}")
+    if not 0 <= reference < n:
+        raise InputError(f"reference index {reference} is not one of the {n} maps")
+    seconds = {}
+    t0 = time.perf_counter()
+    scans = list(scans) if scans is not None else [None] * n
+    indexes = []
+    for k in range(n):
+        if callback is not None:
+            callback("scans", k, n, None)
+        indexes += prepare_maps([grids[k]], [scans[k]], config=config, seed=seed + k,
+                                virtual_poses=virtual_poses)
+    if len({round(i.resolution, 12) for i in indexes}) > 1:
+        raise InputError("the maps have different resolutions; resample them to one first")
+    hists = [orientation_histogram(ix) for ix in indexes]
+    evidence = [evidence_raster(ix, coarse=config.coarse) for ix in indexes]
+    seconds["prepare"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    pairs = {}
+    todo = list(itertools.combinations(range(n), 2))
+    for s, (i, j) in enumerate(todo):
+        if callback is not None:
+            callback("align", s, len(todo), (i, j))
+        pairs[(i, j)] = _pair(indexes, hists, evidence, config, i, j, seed)
+    seconds["pairs"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    boxes = [corners(ix) for ix in indexes]
+    graph = solve_graph(pairs, indexes, reference, config, boxes)
+    seconds["graph"] = time.perf_counter() - t0
+    return MapsResult(pairs, graph, tuple(indexes), seconds)

@@ -1,0 +1,148 @@
+"""The consensus method and the classic peers behind :func:`fusionkit.pipeline.merge`.
+
+Every method returns the same :class:`~fusionkit.pipeline.MergeResult`, so the command line and
+the benchmark compare them on equal terms. The peers place N maps as follows:
+
+* ``map-merge`` / ``map-merge-shipped``: :func:`fusionkit.baselines.map_merge.estimate_maps`
+  (its own largest component and maximum spanning tree; corrected or shipped chaining);
+* ``hough-spectrum``, ``fourier-mellin``: the method's ``estimate_pair`` on every pair, its own
+  accept decision, and a maximum spanning tree by its own confidence grown from the reference.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+
+import numpy as np
+
+from ..fusion import fuse_maps
+from ..transform import Transform2D
+
+__all__ = ["CONSENSUS", "PEERS", "merge_with"]
+
+CONSENSUS = "consensus"
+#: Peer method names -> (baselines module, chaining for map-merge)
+PEERS = {
+    "map-merge": ("map_merge", "corrected"),
+    "map-merge-shipped": ("map_merge", "shipped"),
+    "hough-spectrum": ("hough_spectrum", None),
+    "fourier-mellin": ("fourier_mellin", None),
+}
+
+
+def _tree_from_pairs(n: int, reference: int, accepted: dict):
+    """Maximum spanning tree by confidence grown from ``reference`` over ``accepted``
+    (``(i, j) -> (transform j -> i, confidence)``); returns transforms, confidences, tree."""
+    transforms = [None] * n
+    conf = [0.0] * n
+    transforms[reference] = Transform2D.identity()
+    conf[reference] = 1.0
+    tree = []
+    while True:
+        best = None
+        for (i, j), (t, c) in accepted.items():
+            for p, q, t_qp in ((i, j, t), (j, i, t.inverse)):
+                if transforms[p] is not None and transforms[q] is None and (best is None or c > best[0]):
+                    best = (c, p, q, t_qp)
+        if best is None:
+            return transforms, conf, tree
+        c, p, q, t_qp = best
+        transforms[q] = transforms[p] @ t_qp
+        conf[q] = c
+        tree.append((p, q))
+
+
+def _peer(method: str, grids, reference: int, seed: int, emit):
+    """Transforms, confidences, tree and reasons of a peer method."""
+    import importlib
+    from ..pipeline import MergeEvent
+    module_name, chaining = PEERS[method]
+    mod = importlib.import_module(f"..baselines.{module_name}", __package__)
+    n = len(grids)
+    if module_name == "map_merge":
+        emit(MergeEvent("align", 0, 1, method))
+        est = mod.estimate_maps(grids, chaining=chaining, reference=reference, seed=seed)
+        transforms = list(est.transforms)
+        conf = [float(c) for c in est.confidences]
+        conf[reference] = 1.0
+        tree = list(est.tree)
+        reasons = ["" if transforms[k] is not None else
+                   "not in the largest group of confidently matched maps" for k in range(n)]
+        return transforms, conf, tree, reasons, {}
+    accepted = {}
+    todo = list(itertools.combinations(range(n), 2))
+    estimates = {}
+    for s, (i, j) in enumerate(todo):
+        emit(MergeEvent("align", s, len(todo), f"{grids[j].name} -> {grids[i].name}", (i, j)))
+        e = mod.estimate_pair(grids[i], grids[j], seed=seed)
+        estimates[(i, j)] = e
+        if e.accepted and e.transform is not None:
+            accepted[(i, j)] = (e.transform, float(e.confidence))
+    transforms, conf, tree = _tree_from_pairs(n, reference, accepted)
+    reasons = ["" if transforms[k] is not None else
+               f"{method} accepted no pair linking it to the reference" for k in range(n)]
+    return transforms, conf, tree, reasons, estimates
+
+
+def merge_with(method: str, grids: list, scans: list, names: list, config, emit, t_start: float):
+    """Run ``method`` (consensus or a peer) and build the :class:`MergeResult`."""
+    from ..pairing import FusionPlan
+    from ..pipeline import MapPlacement, MergeEvent, MergeResult, MergeStep
+    n = len(grids)
+    ref = config.reference
+    seconds: dict = {}
+    steps = []
+    logs: tuple = tuple(scans)
+    virtual = tuple(False for _ in range(n))
+    overlap = [0] * n
+    t0 = time.perf_counter()
+    if method == CONSENSUS:
+        from . import ConsensusConfig, estimate_maps
+        cfg = config.consensus if config.consensus is not None else ConsensusConfig()
+
+        def cb(stage, step, total, pair):
+            label = names[step] if pair is None else f"{names[pair[1]]} -> {names[pair[0]]}"
+            emit(MergeEvent(stage, step, total, label, pair))
+
+        res = estimate_maps(grids, scans, config=cfg, reference=ref, seed=config.seed,
+                            virtual_poses=config.virtual_poses, callback=cb)
+        g = res.graph
+        transforms, conf, tree, reasons = list(g.transforms), list(g.confidences), list(g.tree), list(g.reasons)
+        for (i, j), p in res.pairs.items():
+            ov = p.best.check.overlap if p.best is not None else 0
+            steps.append(MergeStep(i, j, None, p.transform, p.confidence, ov,
+                                   p.accepted or (i, j) in g.resolved, p.hypotheses))
+        for a, b in tree:
+            p = res.pairs.get((min(a, b), max(a, b)))
+            overlap[b] = p.best.check.overlap if p is not None and p.best is not None else 0
+        counts = np.zeros((n, n), int)
+        for (i, j), p in res.pairs.items():
+            counts[i, j] = counts[j, i] = len(p.plausible)
+        virtual = tuple(ix.virtual for ix in res.indexes)
+        logs = tuple(ix.log for ix in res.indexes)
+        seconds.update(res.seconds)
+    else:
+        transforms, conf, tree, reasons, estimates = _peer(method, grids, ref, config.seed, emit)
+        counts = np.zeros((n, n), int)
+        for (i, j), e in estimates.items():
+            counts[i, j] = counts[j, i] = int(bool(e.accepted))
+            steps.append(MergeStep(i, j, None, e.transform, float(e.confidence), 0, bool(e.accepted), 0))
+        seconds["align"] = time.perf_counter() - t0
+    placed_order = [ref] + [q for _, q in tree]
+    plan = FusionPlan(counts, tuple(tree), tuple(k for k in range(n) if transforms[k] is None))
+
+    t0 = time.perf_counter()
+    emit(MergeEvent("fuse", 0, 1, "fusing"))
+    fused = fuse_maps(grids, transforms, order=placed_order, keep_steps=True)
+    seconds["fuse"] = time.perf_counter() - t0
+    seconds["total"] = time.perf_counter() - t_start
+    placements = tuple(MapPlacement(k, names[k], transforms[k] is not None, transforms[k],
+                                    float(conf[k]) if transforms[k] is not None else 0.0,
+                                    int(overlap[k]), reasons[k] if transforms[k] is None else "")
+                       for k in range(n))
+    emit(MergeEvent("done", 1, 1, "done"))
+    return MergeResult(fused.grid, placements, tuple(tree), tuple(placed_order), fused, (), plan, {},
+                       tuple(steps), logs, virtual, config, seconds)
+
+

@@ -1,0 +1,252 @@
+"""One pair of maps: candidates from every source, refined, verified, decided."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..errors import InputError
+from ..transform import Transform2D
+from ._hypotheses import cluster_hypotheses, scan_hypotheses
+from ._index import MapIndex
+from ._search import EvidenceRaster, rotation_candidates, translation_candidates
+from ._verify import Check, refine_icp, refine_pso, verify
+
+__all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
+
+
+@dataclass(frozen=True)
+class ConsensusConfig:
+    """Settings of the consensus method.
+
+    Attributes
+    ----------
+    accept : float
+        Least verification score (:class:`~fusionkit.consensus.Check`, 0..1) for a placement.
+    min_overlap_cells : int
+        Least number of wall cells of each map that must land where the other map is known.
+    max_conflict : float
+        Largest fraction of wall cells allowed on the other map's clear free space.
+    margin : float
+        A second, distinct placement whose score is within ``margin`` of the best one makes
+        the pair ambiguous: it is then only merged when a loop through a third map decides.
+    distinct_cells : float
+        Two placements are distinct when some corner of the moving map's known area moves by
+        more than this many cells between them.
+    rotation_peaks : int
+        Wall-direction correlation peaks tried as rotations (each in two branches).
+    translations : int
+        Translation peaks kept per candidate rotation.
+    refine_top : int
+        At most this many grid candidates (the best correlations) are refined and verified.
+    coarse : float
+        Cell size (m) of the translation search.
+    use_scans : bool
+        Use recorded scans (matched spectra) as a source of candidates.
+    virtual_scans : bool
+        Also cast virtual scans for maps without recorded ones and use them the same way.
+    scan_clusters : int
+        Clusters of scan hypotheses refined and verified.
+    pose_spacing : float
+        Scans used for matching are thinned to one per square of this side (m).
+    max_poses : int
+        At most this many scans per map are matched.
+    max_refine_points : int
+        Wall points used by the refiners.
+    pso_refine : bool
+        Polish the best candidate with the paper's swarm (eq. 3) in a small box after ICP.
+    loop_cells : float
+        Largest disagreement (cells, at the moving map's corners) of a loop of three
+        placements for it to count as consistent.
+    final_check : bool
+        Check each placed map against all the others fused, and drop it when it disagrees.
+    """
+
+    accept: float = 0.9
+    min_overlap_cells: int = 100
+    max_conflict: float = 0.03
+    margin: float = 0.04
+    distinct_cells: float = 6.0
+    rotation_peaks: int = 4
+    translations: int = 3
+    refine_top: int = 16
+    coarse: float = 0.1
+    use_scans: bool = True
+    virtual_scans: bool = False
+    scan_clusters: int = 6
+    pose_spacing: float = 0.25
+    max_poses: int = 1500
+    max_refine_points: int = 4000
+    pso_refine: bool = False
+    loop_cells: float = 8.0
+    final_check: bool = True
+
+    def __post_init__(self):
+        if not 0.0 < self.accept <= 1.0:
+            raise InputError(f"accept is a verification score in (0, 1], got {self.accept}")
+        if not 0.0 <= self.max_conflict <= 1.0 or not 0.0 <= self.margin <= 1.0:
+            raise InputError("max_conflict and margin are fractions in [0, 1]")
+        for name in ("min_overlap_cells", "rotation_peaks", "translations", "refine_top",
+                     "scan_clusters", "max_poses", "max_refine_points"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < (0 if name in (
+                    "min_overlap_cells", "scan_clusters") else 1):
+                raise InputError(f"{name} must be a whole number >= 1, got {v!r}")
+        for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"{name} must be a positive number, got {v!r}")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A refined, verified placement of B in A: the transform B -> A, its check and where the
+    hypothesis came from (``"scans"`` or ``"walls"``)."""
+
+    transform: Transform2D
+    check: Check
+    source: str
+
+    @property
+    def rank(self) -> float:
+        """Ordering key: agreement minus the fraction of conflicting walls."""
+        return self.check.score - self.check.conflict_fraction
+
+
+@dataclass(frozen=True, eq=False)
+class PairResult:
+    """What the consensus method concluded about maps ``a`` and ``b``.
+
+    Attributes
+    ----------
+    a, b : int
+        Map indices; transforms map ``b``'s frame into ``a``'s.
+    transform : Transform2D or None
+        The best verified placement (None when no candidate came out at all).
+    confidence : float
+        Its verification score (0..1).
+    accepted : bool
+        Whether it passes the thresholds and has no close rival.
+    ambiguous : bool
+        Whether it passes the thresholds but a distinct rival does too.
+    plausible : tuple of Candidate
+        Every distinct candidate that passes the thresholds, best first.
+    best : Candidate or None
+    candidates : int
+        Hypotheses refined.
+    hypotheses : int
+        Scan matches voted.
+    reason : str
+        Why it was not accepted (empty when accepted).
+    seconds : float
+    """
+
+    a: int
+    b: int
+    transform: Transform2D | None
+    confidence: float
+    accepted: bool
+    ambiguous: bool
+    plausible: tuple = ()
+    best: Candidate | None = None
+    candidates: int = 0
+    hypotheses: int = 0
+    reason: str = ""
+    seconds: float = 0.0
+    diagnostics: dict = field(default_factory=dict)
+
+
+def corners(index: MapIndex) -> np.ndarray:
+    """The four corners (m, map frame) of the bounding box of the map's known cells."""
+    r, c = np.nonzero(index.known)
+    if r.size == 0:
+        r, c = np.array([0, index.grid.rows - 1]), np.array([0, index.grid.cols - 1])
+    rr = np.array([r.min(), r.min(), r.max(), r.max()], float)
+    cc = np.array([c.min(), c.max(), c.min(), c.max()], float)
+    return index.grid.cell_to_world(rr, cc)
+
+
+def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
+    """Largest distance (m) between where ``t1`` and ``t2`` put the points ``pts``."""
+    return float(np.sqrt(((t1(pts) - t2(pts)) ** 2).sum(axis=1)).max())
+
+
+def _plausible(chk: Check, cfg: ConsensusConfig) -> bool:
+    return (chk.score >= cfg.accept and chk.overlap >= cfg.min_overlap_cells
+            and chk.conflict_fraction <= cfg.max_conflict)
+
+
+def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
+                     evidence_a: EvidenceRaster, ia: int = 0, ib: int = 1, seed=0) -> PairResult:
+    """Place map ``b`` in map ``a`` (both prepared), from every source of candidates."""
+    t0 = time.perf_counter()
+    starts: list[tuple[Transform2D, str]] = []
+    rots = rotation_candidates(hist_a, hist_b, cfg.rotation_peaks)
+    n_hyp = 0
+    usable = cfg.use_scans and (cfg.virtual_scans or not (a.virtual or b.virtual))
+    if usable and len(a.spectra) and len(b.spectra):
+        h = scan_hypotheses(a, b)
+        n_hyp = len(h)
+        centre = b.points.mean(axis=0) if len(b.points) else None
+        clusters = cluster_hypotheses(h, centre=centre, max_clusters=cfg.scan_clusters)
+        starts += [(c.transform, "scans") for c in clusters]
+        for c in clusters[:2]:
+            if all(abs(math.remainder(c.transform.theta - r, 2 * math.pi)) > math.radians(2) for r in rots):
+                rots.append(c.transform.theta)
+    wall: list[tuple[float, Transform2D]] = []
+    for th in rots:
+        wall += [(s, t) for t, s in translation_candidates(evidence_a, b.points, th,
+                                                             count=cfg.translations)]
+    wall.sort(key=lambda st: -st[0])
+    starts += [(t, "walls") for _, t in wall[: cfg.refine_top]]
+
+    box = corners(b)
+    res = a.resolution
+    refined: list[Candidate] = []
+    for start, source in starts:
+        t = refine_icp(a, b.refine_points, start)
+        if any(displacement(t, c.transform, box) < 2 * res for c in refined):
+            continue
+        refined.append(Candidate(t, verify(a, b, t), source))
+    refined.sort(key=lambda c: -c.rank)
+    seconds = time.perf_counter() - t0
+    if not refined:
+        return PairResult(ia, ib, None, 0.0, False, False, reason="no candidate placement found",
+                          seconds=seconds, hypotheses=n_hyp)
+    best = refined[0]
+    if cfg.pso_refine:
+        t = refine_pso(a.points, b.refine_points, best.transform, res, seed=seed)
+        t = refine_icp(a, b.refine_points, t, gates=(3.0, 2.0))
+        chk = verify(a, b, t)
+        if chk.score - chk.conflict_fraction >= best.rank:
+            best = Candidate(t, chk, best.source)
+            refined[0] = best
+    plausible = []
+    for c in refined:
+        if _plausible(c.check, cfg) and all(displacement(c.transform, p.transform, box)
+                                            > cfg.distinct_cells * res for p in plausible):
+            plausible.append(c)
+    ok = _plausible(best.check, cfg)
+    rivals = [c for c in plausible[1:] if c.check.score >= best.check.score - cfg.margin]
+    accepted = ok and not rivals
+    chk = best.check
+    if accepted:
+        reason = ""
+    elif ok:
+        reason = (f"ambiguous: {len(rivals) + 1} distinct placements agree on "
+                  f"{100 * min(r.check.score for r in rivals):.0f}-{100 * chk.score:.0f}% of the walls")
+    elif chk.overlap < cfg.min_overlap_cells:
+        reason = f"best placement overlaps only {chk.overlap} wall cells (needs {cfg.min_overlap_cells})"
+    elif chk.score < cfg.accept:
+        reason = (f"best placement agrees on {100 * chk.score:.0f}% of the overlapping walls "
+                  f"(needs {100 * cfg.accept:.0f}%)")
+    else:
+        reason = (f"best placement puts {100 * chk.conflict_fraction:.1f}% of the walls on open "
+                  f"floor (allows {100 * cfg.max_conflict:.1f}%)")
+    return PairResult(ia, ib, best.transform, float(chk.score), bool(accepted), bool(ok and rivals),
+                      tuple(plausible), best, len(starts), n_hyp, reason,
+                      time.perf_counter() - t0,
+                      {"rotations": len(rots), "check": chk.as_dict()})

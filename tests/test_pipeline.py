@@ -1,0 +1,177 @@
+"""The paper's chain end to end: merge(), `fusionkit merge`, `fusionkit run`, evaluate."""
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit.cli import main
+from fusionkit.cli.evaluate import evaluate_files
+from fusionkit.errors import InputError
+from fusionkit.mapio import load_map, save_map
+from fusionkit.metrics import evaluate_map
+from fusionkit.pipeline import MergeConfig, merge
+from fusionkit.scanlog import ScanLog, load_scans, save_scans
+from fusionkit.simulate import SimulationConfig, simulate, write_run
+from fusionkit.transform import Transform2D
+from fusionkit.worlds import default_world, make_world
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return simulate(default_world(), SimulationConfig(robots=3, poses=1500, seed=4))
+
+
+@pytest.fixture(scope="module")
+def run_dir(sim, tmp_path_factory):
+    d = tmp_path_factory.mktemp("run") / "run"
+    write_run(sim, d)
+    return d
+
+
+def _true_relative(sim, k, ref=0):
+    return sim.robots[ref].transform.inverse @ sim.robots[k].transform
+
+
+def test_merge_places_every_robot_within_2_deg_and_3_cells(sim):
+    res = merge([r.grid for r in sim.robots], scans=[r.scans for r in sim.robots],
+                config=MergeConfig(seed=1))
+    assert res.all_merged
+    for p in res.placements:
+        dt, dr = p.transform.error_to(_true_relative(sim, p.index))
+        assert dt < 3 * sim.world.resolution and math.degrees(dr) < 2.0, p
+        assert 0.7 <= p.confidence <= 1.0
+    # the fused map, put in the world, is as good as the maps allow
+    m = evaluate_map(res.grid, sim.world, sim.robots[0].transform)
+    assert m.completeness > 60 and m.precision_tol1 > 95
+    # diagnostics a notebook draws from
+    assert len(res.unique) == 3 and all(u.count >= 150 for u in res.unique)
+    assert res.plan.counts.shape == (3, 3)
+    assert all(s.alignment is not None and len(s.alignment.pso.history) >= 2 for s in res.steps)
+    assert len(res.fused.steps) == 3 and set(res.order) == {0, 1, 2}
+
+
+def test_merge_is_deterministic_for_a_seed(sim):
+    grids, scans = [r.grid for r in sim.robots[:2]], [r.scans for r in sim.robots[:2]]
+    a = merge(grids, scans=scans, config=MergeConfig(seed=5))
+    b = merge(grids, scans=scans, config=MergeConfig(seed=5))
+    assert a.placements[1].transform == b.placements[1].transform
+    np.testing.assert_array_equal(a.grid.data, b.grid.data)
+
+
+def test_callback_sees_each_pso_iteration_and_can_cancel(sim):
+    from fusionkit.pipeline import MergeCancelled
+    grids, scans = [r.grid for r in sim.robots[:2]], [r.scans for r in sim.robots[:2]]
+    seen = []
+
+    def cb(ev):
+        seen.append(ev)
+        return ev.stage == "align" and ev.pso is not None and ev.pso.iteration >= 3
+
+    with pytest.raises(MergeCancelled):
+        merge(grids, scans=scans, callback=cb)
+    stages = [e.stage for e in seen]
+    assert stages.index("unique_poses") < stages.index("pairing") < stages.index("align")
+    assert seen[-1].pso.iteration == 3
+
+
+def test_maps_of_different_worlds_are_not_merged():
+    a = simulate(make_world("office", seed=1), SimulationConfig(robots=1, poses=800, seed=1)).robots[0]
+    b = simulate(make_world("cave", seed=2), SimulationConfig(robots=1, poses=800, seed=2)).robots[0]
+    res = merge([a.grid, b.grid], scans=[a.scans, b.scans])
+    assert res.placements[0].merged and not res.placements[1].merged
+    assert res.placements[1].transform is None and res.placements[1].reason
+
+
+def test_merge_refuses_a_single_map_and_mismatched_scans(sim):
+    g = sim.robots[0].grid
+    with pytest.raises(InputError, match="at least two"):
+        merge([g])
+    with pytest.raises(InputError, match="scan logs for"):
+        merge([g, g], scans=[sim.robots[0].scans])
+    short = sim.robots[1].scans.subset(slice(0, 8))
+    with pytest.raises(InputError, match="sub_sec"):
+        merge([g, sim.robots[1].grid], scans=[sim.robots[0].scans, short])
+
+
+def test_cli_merge_writes_the_contract_report_and_evaluate_agrees(run_dir, sim, capsys):
+    inputs = [str(run_dir / f"robot_{k}.yaml") for k in (1, 2, 3)]
+    out = run_dir / "merged.yaml"
+    report = run_dir / "report.json"
+    code = main(["merge", *inputs, "-o", str(out), "--report", str(report), "--seed", "2"])
+    assert code == 0
+    rep = json.loads(report.read_text())
+    assert rep["method"] == "spectral-pso" and rep["reference"] == inputs[0]
+    assert rep["output"] == str(out)
+    assert [m["input"] for m in rep["maps"]] == inputs
+    assert rep["maps"][0]["transform"] == {"x": 0.0, "y": 0.0, "theta": 0.0}
+    for m in rep["maps"]:
+        assert m["merged"] is True and set(m["transform"]) == {"x", "y", "theta"}
+        assert 0.0 <= m["confidence"] <= 1.0
+    assert all(len(pair) == 2 for pair in rep["fusion_order"])
+    assert rep["seconds"]["total"] > 0
+    merged = load_map(out)
+    lib = evaluate_map(merged, load_map(run_dir / "world.yaml"), sim.robots[0].transform)
+    ev = evaluate_files(out, run_dir / "truth.json", report=report)
+    assert ev["metrics"]["completeness"] == pytest.approx(lib.completeness, abs=1e-3)
+    assert ev["metrics"]["precision"] == pytest.approx(lib.precision, abs=1e-3)
+    capsys.readouterr()
+    assert main(["evaluate", str(out), "--truth", str(run_dir / "truth.json"),
+                 "--report", str(report), "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert printed["metrics"]["accuracy"] == pytest.approx(lib.accuracy, abs=1e-3)
+
+
+def test_cli_merge_exit_3_when_a_map_does_not_fit(tmp_path, run_dir, capsys):
+    other = simulate(make_world("cave", seed=3), SimulationConfig(robots=1, poses=800, seed=3)).robots[0]
+    save_map(other.grid, tmp_path / "cave.yaml")
+    save_scans(tmp_path / "cave.scans.npz", other.scans)
+    out = tmp_path / "m.yaml"
+    code = main(["merge", str(run_dir / "robot_1.yaml"), str(tmp_path / "cave.yaml"), "-o", str(out)])
+    assert code == 3
+    rep = json.loads((tmp_path / "m.report.json").read_text())
+    assert rep["maps"][1]["merged"] is False and rep["maps"][1]["transform"] is None
+    assert load_map(out).shape == load_map(run_dir / "robot_1.yaml").shape or out.exists()
+
+
+def _one_line_error(capsys, code):
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "Traceback" not in err and len(err.splitlines()) == 1, err
+    return err
+
+
+def test_cli_merge_bad_inputs_give_one_line_and_write_nothing(tmp_path, run_dir, capsys):
+    a, b = str(run_dir / "robot_1.yaml"), str(run_dir / "robot_2.yaml")
+    before = (run_dir / "robot_1.pgm").read_bytes()
+    err = _one_line_error(capsys, main(["merge", a, b, "-o", a]))
+    assert "overwrite" in err and (run_dir / "robot_1.pgm").read_bytes() == before
+    err = _one_line_error(capsys, main(["merge", a, str(tmp_path / "nope.yaml"), "-o", str(tmp_path / "m.yaml")]))
+    assert "nope.yaml" in err
+    err = _one_line_error(capsys, main(["merge", a, "-o", str(tmp_path / "m.yaml")]))
+    assert "two maps" in err
+    # NaN ranges in a scan log
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for ext in (".yaml", ".pgm"):
+        shutil.copy(run_dir / f"robot_2{ext}", bad / f"robot_2{ext}")
+    log = load_scans(run_dir / "robot_2.scans.npz")
+    r = log.ranges.copy()
+    r[3, 5] = np.nan
+    np.savez(bad / "robot_2.scans.npz", poses=log.poses, ranges=r, angle_min=log.angle_min,
+             angle_increment=log.angle_increment, range_max=log.range_max)
+    err = _one_line_error(capsys, main(["merge", a, str(bad / "robot_2.yaml"), "-o", str(tmp_path / "m.yaml")]))
+    assert "NaN" in err and "robot_2.scans.npz" in err
+    assert not (tmp_path / "m.yaml").exists() and not (tmp_path / "m.pgm").exists()
+
+
+def test_maps_without_scans_merge_by_virtual_scans(sim):
+    grids = [r.grid for r in sim.robots[:2]]
+    res = merge(grids, config=MergeConfig(seed=3))
+    assert res.virtual == (True, True)
+    p = res.placements[1]
+    if p.merged:   # a confident placement must be right; a refusal is allowed
+        dt, dr = p.transform.error_to(_true_relative(sim, 1))
+        assert dt < 3 * sim.world.resolution and math.degrees(dr) < 2.0

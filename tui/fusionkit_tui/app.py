@@ -1,0 +1,62 @@
+"""The operator's terminal UI of fusionkit: pick robot maps, watch PSO converge, export.
+
+Start it with ``fusionkit tui [DIR or MAP.yaml ...]`` or build it with :func:`make_app`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+from textual.app import App
+
+from .runner import initial_selection
+from .screens.main import MainScreen
+
+__all__ = ["FusionkitApp", "make_app"]
+
+
+class FusionkitApp(App):
+    """Fuse a team's maps from a terminal.
+
+    Parameters
+    ----------
+    root : Path
+        Directory the map browser starts in.
+    selected : list of Path
+        Maps selected at start, reference first.
+    """
+
+    TITLE = "fusionkit"
+    SUB_TITLE = "multi-robot map fusion"
+    CSS_PATH = "app.tcss"
+    ENABLE_COMMAND_PALETTE = False
+    BINDINGS = [("ctrl+q", "quit", "Quit")]
+
+    def __init__(self, root: Path, selected: Sequence[Path] = ()) -> None:
+        super().__init__()
+        self._root = Path(root)
+        self._selected = [Path(p) for p in selected]
+
+    def get_default_screen(self) -> MainScreen:
+        return MainScreen(self._root, self._selected)
+
+    @property
+    def main(self) -> MainScreen:
+        """The main screen (also while a dialog is open above it)."""
+        return next(s for s in self.screen_stack if isinstance(s, MainScreen))
+
+
+def make_app(paths: Sequence = ()) -> FusionkitApp:
+    """The app for the command-line arguments ``paths``.
+
+    No path: browse the current directory. One directory (a simulated run, say): browse it with
+    its robot maps selected. Map YAML files: those maps selected, browsing their directory.
+
+    Raises
+    ------
+    InputError
+        A path that does not exist or is neither a directory nor a map YAML.
+    """
+    root, selected = initial_selection(paths)
+    return FusionkitApp(root, selected)
