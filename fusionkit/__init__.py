@@ -17,32 +17,40 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from .errors import FusionkitError, InputError, MapFormatError, NotMergedError, ScanLogError
-from .grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from .transform import Transform2D
-from .scanlog import ScanLog, load_scans, save_scans, scans_path_for
-from .mapio import load_map, map_info, save_map
-from .mapping import MappingConfig, build_grid
-from .resample import canvas_for, resample
-from .worlds import default_world, make_world
-from .simulate import LidarConfig, MotionConfig, Simulation, SimulationConfig, simulate, write_run
-from .unique_poses import UniquePoses, find_unique_poses, scan_spectra
-from .pairing import agreement, fusion_order, pearson_matrix
-from .pso import PSOConfig, PSOResult, pso_minimize
-from .alignment import AlignmentConfig, align_points, overlap_score
-from .fusion import FusedMap, fuse_cells, fuse_maps
-from .metrics import MapMetrics, evaluate_map, table1
-from .pipeline import METHODS, MergeCancelled, MergeConfig, MergeEvent, MergeResult, merge
+import importlib
 
-__all__ = [
-    "__version__", "FusionkitError", "InputError", "MapFormatError", "NotMergedError",
-    "ScanLogError", "OccupancyGrid", "FREE", "OCCUPIED", "UNKNOWN", "Transform2D", "ScanLog",
-    "load_scans", "save_scans", "scans_path_for", "load_map", "save_map", "map_info",
-    "MappingConfig", "build_grid", "resample", "canvas_for", "default_world", "make_world",
-    "LidarConfig", "MotionConfig", "Simulation", "SimulationConfig", "simulate", "write_run",
-    "UniquePoses", "find_unique_poses", "scan_spectra", "agreement", "fusion_order",
-    "pearson_matrix", "PSOConfig", "PSOResult", "pso_minimize", "AlignmentConfig",
-    "align_points", "overlap_score", "FusedMap", "fuse_cells", "fuse_maps", "MapMetrics",
-    "evaluate_map", "table1", "METHODS", "MergeCancelled", "MergeConfig", "MergeEvent",
-    "MergeResult", "merge",
-]
+# Public names and the module that defines each. They are imported on first use, so that a
+# command or script pays only for the parts it touches (numba, scipy and OpenCV load slowly).
+_EXPORTS = {
+    **dict.fromkeys(['FusionkitError', 'InputError', 'MapFormatError', 'NotMergedError', 'ScanLogError'], "errors"),
+    **dict.fromkeys(['FREE', 'OCCUPIED', 'UNKNOWN', 'OccupancyGrid'], "grid"),
+    **dict.fromkeys(['Transform2D'], "transform"),
+    **dict.fromkeys(['ScanLog', 'load_scans', 'save_scans', 'scans_path_for'], "scanlog"),
+    **dict.fromkeys(['load_map', 'map_info', 'save_map'], "mapio"),
+    **dict.fromkeys(['MappingConfig', 'build_grid'], "mapping"),
+    **dict.fromkeys(['canvas_for', 'resample'], "resample"),
+    **dict.fromkeys(['default_world', 'make_world'], "worlds"),
+    **dict.fromkeys(['LidarConfig', 'MotionConfig', 'Simulation', 'SimulationConfig', 'simulate', 'write_run'], "simulate"),
+    **dict.fromkeys(['UniquePoses', 'find_unique_poses', 'scan_spectra'], "unique_poses"),
+    **dict.fromkeys(['agreement', 'fusion_order', 'pearson_matrix'], "pairing"),
+    **dict.fromkeys(['PSOConfig', 'PSOResult', 'pso_minimize'], "pso"),
+    **dict.fromkeys(['AlignmentConfig', 'align_points', 'overlap_score'], "alignment"),
+    **dict.fromkeys(['FusedMap', 'fuse_cells', 'fuse_maps'], "fusion"),
+    **dict.fromkeys(['MapMetrics', 'evaluate_map', 'table1'], "metrics"),
+    **dict.fromkeys(['METHODS', 'MergeCancelled', 'MergeConfig', 'MergeEvent', 'MergeResult', 'merge'], "pipeline"),
+}
+
+__all__ = ["__version__", *_EXPORTS]
+
+
+def __getattr__(name):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'fusionkit' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_EXPORTS))

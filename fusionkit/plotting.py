@@ -7,8 +7,11 @@ Grids are drawn in metres with the map-server palette: occupied black, free whit
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from .errors import InputError
 from .grid import OccupancyGrid
 from .resample import canvas_for, resample
 from .transform import Transform2D
@@ -124,3 +127,1089 @@ def plot_simulation(sim, *, max_robot_panels: int = 8):
         if k == 0:
             ax.legend(loc="upper right", fontsize=7, framealpha=0.85)
     return fig
+
+
+# ---------------------------------------------------------------------------------------------
+# The method step by step: figures of the notebooks
+# ---------------------------------------------------------------------------------------------
+#: Grey levels of unknown and occupied cells in the figures coloured by robot.
+_RGB_UNKNOWN = np.array([0.78, 0.78, 0.78])
+_RGB_OCCUPIED = np.array([0.0, 0.0, 0.0])
+#: How strongly free cells take their robot's colour (0 white, 1 the full colour).
+_TINT = 0.45
+
+
+def robot_colour(k: int) -> str:
+    """Colour of robot ``k`` (0-based) in every figure."""
+    return ROBOT_COLOURS[k % len(ROBOT_COLOURS)]
+
+
+def _new_figure(width: float, height: float):
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(width, height), layout="constrained")
+
+
+def _legend_patches(colours, labels):
+    from matplotlib.patches import Patch
+
+    return [Patch(facecolor=c, edgecolor="0.3", label=s) for c, s in zip(colours, labels)]
+
+
+def state_legend(ax, extra=(), *, loc="upper right", fontsize=7, free: bool = True):
+    """Add a legend of the three cell states (free white, unknown grey, occupied black),
+    after the ``extra`` legend handles; ``free=False`` leaves the free entry out."""
+    from matplotlib.patches import Patch
+
+    handles = list(extra) + ([Patch(facecolor="white", edgecolor="0.3", label="free")] if free else [])
+    handles += [Patch(facecolor=(0.78, 0.78, 0.78), edgecolor="0.3", label="unknown"),
+                Patch(facecolor="black", edgecolor="0.3", label="occupied")]
+    ax.legend(handles=handles, loc=loc, fontsize=fontsize, framealpha=0.9)
+
+
+def owner_image(grid: OccupancyGrid, owner: np.ndarray, *, known=None) -> np.ndarray:
+    """RGB image ``(rows, cols, 3)`` of a fused map (row 0 = lowest y): occupied black, unknown
+    grey, free cells tinted with the colour of the robot in ``owner`` (index per cell, ``-1``
+    none). ``known`` restricts the drawing to some cells (the rest is drawn unknown)."""
+    from matplotlib.colors import to_rgb
+
+    states = grid.trinary()
+    own = np.asarray(owner)
+    if own.shape != states.shape:
+        raise InputError(f"owner must have the grid's shape {states.shape}, got {own.shape}")
+    img = np.empty(states.shape + (3,))
+    img[:] = _RGB_UNKNOWN
+    free = states == 0
+    if known is not None:
+        free &= known
+    for k in np.unique(own[free & (own >= 0)]):
+        sel = free & (own == k)
+        img[sel] = 1.0 - _TINT * (1.0 - np.array(to_rgb(robot_colour(int(k)))))
+    img[free & (own < 0)] = 1.0
+    occ = states == 100
+    if known is not None:
+        occ &= known
+    img[occ] = _RGB_OCCUPIED
+    return img
+
+
+def _imshow_rgb(ax, grid: OccupancyGrid, img: np.ndarray):
+    if grid.origin[2] != 0.0:
+        raise InputError("only axis-aligned grids (origin yaw 0) can be coloured by robot")
+    x0, y0 = grid.origin[0], grid.origin[1]
+    extent = (x0, x0 + grid.cols * grid.resolution, y0, y0 + grid.rows * grid.resolution)
+    ax.imshow(img, origin="lower", extent=extent, interpolation="nearest")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+
+
+def plot_fused(ax, fused, names=None, *, step: int | None = None, title: str | None = None,
+               legend: bool = True):
+    """Draw a :class:`~fusionkit.fusion.FusedMap` with each free cell tinted by the robot whose
+    map first made it known (occupied black, unknown grey).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+    fused : FusedMap
+    names : sequence of str, optional
+        Names of the maps given to ``fuse_maps`` (default ``robot_1``, ...).
+    step : int, optional
+        Draw ``fused.steps[step]`` (the map after ``step + 1`` maps were fused) instead of the
+        final map; needs ``keep_steps=True``.
+    title : str, optional
+    legend : bool
+        Name the robots' colours and the cell states.
+    """
+    order = list(fused.order)
+    n = max(order) + 1 if order else 0
+    names = list(names) if names is not None else [f"robot_{k + 1}" for k in range(n)]
+    grid = fused.grid
+    used = order
+    if step is not None:
+        if not fused.steps:
+            raise InputError("this FusedMap kept no steps; fuse with keep_steps=True")
+        grid = fused.steps[step]
+        used = order[: step + 1]
+    img = owner_image(grid, fused.owner, known=grid.known_mask())
+    _imshow_rgb(ax, grid, img)
+    if title is not None:
+        ax.set_title(title)
+    if legend:
+        from matplotlib.colors import to_rgb
+
+        tints = [1.0 - _TINT * (1.0 - np.array(to_rgb(robot_colour(k)))) for k in used]
+        state_legend(ax, _legend_patches(tints, [f"free, first seen by {names[k]}" for k in used]),
+                     free=False)
+
+
+def plot_merge(result, maps, *, names=None, title: str | None = None):
+    """The inputs and the outcome of :func:`~fusionkit.pipeline.merge` in one figure: each
+    input map in its own frame (left, small) and the fused map coloured by robot (right).
+
+    Parameters
+    ----------
+    result : MergeResult
+    maps : sequence of OccupancyGrid
+        The maps given to ``merge``.
+    names : sequence of str, optional
+        Map names (default: the placements' names).
+    title : str, optional
+        Title of the fused map's panel.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    maps = list(maps)
+    n = len(result.placements)
+    if len(maps) != n:
+        raise InputError(f"give the {n} maps that were merged, got {len(maps)}")
+    names = list(names) if names is not None else [p.name for p in result.placements]
+    rows = int(np.ceil(n / 2))
+    fig = _new_figure(14.0, max(6.0, 3.0 * rows))
+    gs = fig.add_gridspec(rows, 4)
+    for k, p in enumerate(result.placements):
+        ax = fig.add_subplot(gs[k // 2, k % 2])
+        state = "merged" if p.merged else "not merged"
+        plot_grid(ax, maps[k], title=f"{names[k]}: own frame, {state}")
+        ax.title.set_color(robot_colour(k))
+        ax.title.set_fontsize(9)
+        ax.tick_params(labelsize=7)
+        ax.xaxis.label.set_fontsize(8)
+        ax.yaxis.label.set_fontsize(8)
+    ax = fig.add_subplot(gs[:, 2:])
+    merged = sum(p.merged for p in result.placements)
+    if title is None:
+        order = " -> ".join(names[k] for k in result.order)
+        title = (f"Fused map in {names[result.config.reference]}'s frame: {merged} of {n} maps "
+                 f"merged\nfusion order {order}")
+    plot_fused(ax, result.fused, names, title=title)
+    return fig
+
+
+def plot_scan(log, index: int, *, grid: OccupancyGrid | None = None, every: int = 3,
+              colour: str = "tab:red", title: str | None = None):
+    """One LIDAR scan: where its beams go on the map (left) and the ranges as a signal over the
+    beam angle (right), the ``f(x)`` whose DFT is eq. 1.
+
+    Parameters
+    ----------
+    log : ScanLog
+    index : int
+        Which scan.
+    grid : OccupancyGrid, optional
+        The map in the log's frame, drawn underneath.
+    every : int
+        Draw every ``every``-th beam on the map.
+    colour : str
+        Colour of the beams and the signal.
+    title : str, optional
+        Title of the map panel.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.lines import Line2D
+
+    if not 0 <= index < log.n_scans:
+        raise InputError(f"scan index {index} is out of range; the log has {log.n_scans} scans")
+    fig = _new_figure(13.0, 5.2)
+    ax_map, ax_sig = fig.subplots(1, 2, width_ratios=[1.0, 1.25])
+    x, y, th = log.poses[index]
+    if grid is not None:
+        plot_grid(ax_map, grid, title="")
+    ax_map.plot(log.poses[:, 0], log.poses[:, 1], "-", color="0.55", lw=0.6,
+                label="trajectory (odometry)")
+    r = log.ranges[index].astype(float)
+    hit = np.isfinite(r) & (r <= log.range_max)
+    ang = th + log.beam_angles
+    rr = np.where(hit, r, log.range_max)
+    ex, ey = x + rr * np.cos(ang), y + rr * np.sin(ang)
+    sel = np.arange(0, log.n_beams, max(1, int(every)))
+    for j in sel:
+        ax_map.plot([x, ex[j]], [y, ey[j]], "-" if hit[j] else ":", color=colour,
+                    lw=0.5, alpha=0.7 if hit[j] else 0.4)
+    ax_map.plot(ex[hit], ey[hit], ".", color=colour, ms=2.5)
+    ax_map.annotate("", xy=(x + 1.2 * np.cos(th), y + 1.2 * np.sin(th)), xytext=(x, y),
+                    arrowprops=dict(arrowstyle="->", color="k", lw=2))
+    ax_map.plot(x, y, "o", color=colour, mec="k", ms=8)
+    pad = log.range_max + 0.5
+    ax_map.set_xlim(x - pad, x + pad)
+    ax_map.set_ylim(y - pad, y + pad)
+    ax_map.set_aspect("equal")
+    ax_map.set_xlabel("x (m)")
+    ax_map.set_ylabel("y (m)")
+    ax_map.set_title(title if title is not None else
+                     f"scan {index} at x = {x:.1f} m, y = {y:.1f} m, heading {np.degrees(th):.0f} deg")
+    ax_map.legend(handles=[Line2D([], [], color="0.55", lw=0.8, label="trajectory (odometry)"),
+                           Line2D([], [], color=colour, lw=0.8, label="beam with a return"),
+                           Line2D([], [], color=colour, lw=0.8, ls=":", alpha=0.5,
+                                  label=f"no return within {log.range_max:g} m"),
+                           Line2D([], [], color="k", marker=r"$\rightarrow$", ls="", ms=12,
+                                  label="robot heading")],
+                  loc="upper right", fontsize=7, framealpha=0.9)
+
+    deg = np.degrees(log.beam_angles)
+    ax_sig.plot(deg, rr, "-", color=colour, lw=1.0, label="range of each beam")
+    ax_sig.plot(deg[~hit], np.full((~hit).sum(), log.range_max), "x", color="0.4", ms=4,
+                label=f"no return (counted as range_max = {log.range_max:g} m)")
+    ax_sig.set_xlabel("beam angle relative to the heading (deg)")
+    ax_sig.set_ylabel("range (m)")
+    ax_sig.set_xlim(deg[0], deg[-1])
+    ax_sig.set_ylim(0, log.range_max * 1.08)
+    ax_sig.set_title(f"The scan as a signal f(x), x = beam 0..{log.n_beams - 1} (input of eq. 1)")
+    ax_sig.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    ax_sig.grid(alpha=0.3)
+    return fig
+
+
+def plot_drift(run, *, colour: str | None = None):
+    """A robot's odometry against its true path (left) and the map its scans make with that
+    odometry (right), both in the robot's own frame (m).
+
+    Parameters
+    ----------
+    run : RobotRun
+        From :func:`~fusionkit.simulate.simulate`.
+    colour : str, optional
+        Colour of the odometry.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    colour = colour or "tab:red"
+    true_own = run.transform.inverse.apply_pose(run.trajectory)
+    odo = run.scans.poses
+    err = float(np.hypot(*(odo[-1, :2] - true_own[-1, :2])))
+    fig = _new_figure(13.0, 5.2)
+    ax, ax_map = fig.subplots(1, 2)
+    ax.plot(true_own[:, 0], true_own[:, 1], "-", color="k", lw=0.9, label="true path")
+    ax.plot(odo[:, 0], odo[:, 1], "-", color=colour, lw=0.9, alpha=0.85,
+            label=f"odometry (ends {err:.2f} m off)")
+    ax.plot(0, 0, "o", color=colour, mec="k", ms=7, label="start (0, 0)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, own frame)")
+    ax.set_ylabel("y (m, own frame)")
+    ax.set_title(f"{run.name}: odometry against the truth, {run.path_length:.0f} m driven")
+    ax.legend(loc="best", fontsize=8, framealpha=0.9)
+    plot_grid(ax_map, run.grid, title=f"{run.name}: the map built with this odometry")
+    state_legend(ax_map)
+    return fig
+
+
+def plot_worlds(worlds):
+    """The ground-truth worlds side by side, each with its size (m)."""
+    worlds = list(worlds)
+    fig = _new_figure(5.6 * len(worlds), 4.6)
+    axes = np.atleast_1d(fig.subplots(1, len(worlds)))
+    for ax, w in zip(axes, worlds):
+        x0, y0, x1, y1 = w.bounds()
+        plot_grid(ax, w, title=f"{w.name}: {x1 - x0:.0f} x {y1 - y0:.0f} m, {w.resolution:g} m cells")
+    state_legend(axes[-1])
+    return fig
+
+
+# -- unique poses (Algorithm 1) ----------------------------------------------------------------
+def plot_section_spectra(unique, poses, *, labels=None):
+    """The overall spectrum against the spectra of a few sections (Algorithm 1, lines 1-6).
+
+    One panel per pose in ``poses``: the robot's overall spectrum (mean of all its scans'
+    ``|DFT|``, thick black) and the spectra of the ``2 * sub_sec`` scans of the pose's section
+    (thin, coloured from the first scan of the section to the last).
+
+    Parameters
+    ----------
+    unique : UniquePoses
+    poses : sequence of int
+        Pose indices (each must have a full section).
+    labels : sequence of str, optional
+        Panel titles' first words (default "pose i").
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib as mpl
+    from matplotlib.lines import Line2D
+
+    poses = [int(p) for p in poses]
+    s = unique.sub_sec
+    n = unique.spectra.shape[0]
+    for p in poses:
+        if not s <= p < n - s:
+            raise InputError(f"pose {p} has no full section; use a pose in [{s}, {n - s})")
+    labels = list(labels) if labels is not None else [f"pose {p}" for p in poses]
+    fig = _new_figure(6.3 * len(poses), 4.8)
+    axes = np.atleast_1d(fig.subplots(1, len(poses), sharey=True))
+    u = np.arange(1, unique.spectra.shape[1] + 1)  # bin 0 (DC) is left out by default
+    cmap = mpl.colormaps["viridis"]
+    for ax, p, lab in zip(axes, poses, labels):
+        sec = range(p - s, p + s)
+        for j, k in enumerate(sec):
+            ax.plot(u, unique.spectra[k], "-", lw=0.8, color=cmap(j / max(1, 2 * s - 1)), alpha=0.8)
+        ax.plot(u, unique.overall_spectrum, "-", color="k", lw=2.2)
+        ax.set_yscale("log")
+        ax.set_xscale("log")
+        ax.set_xlabel("frequency u (cycles per turn of the scan)")
+        verdict = "unique" if unique.section_score[p] >= unique.delta else "typical"
+        div = unique.divergence[list(sec)]
+        below = int((div < unique.delta).sum())
+        ax.set_title(f"{lab}: {verdict} ({below} of {2 * s} scans within delta of o_spec)",
+                     fontsize=10)
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(handles=[Line2D([], [], color="k", lw=2.2, label="overall spectrum o_spec (all poses)"),
+                           Line2D([], [], color=cmap(0.0), lw=1, label=f"scan {p - s} (first of section)"),
+                           Line2D([], [], color=cmap(1.0), lw=1, label=f"scan {p + s - 1} (last of section)")],
+                  loc="lower left", fontsize=8, framealpha=0.9)
+    axes[0].set_ylabel("|DFT(u)| (m)")
+    return fig
+
+
+def plot_divergence(ax, unique, *, window=None, title: str | None = None):
+    """Algorithm 1 along the trajectory: each scan's divergence from the overall spectrum
+    (line 6), the section score (the 2nd smallest divergence in the section) against delta, and
+    the unique poses it gives (line 15).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+    unique : UniquePoses
+    window : (start, stop), optional
+        Range of pose indices to draw.
+    title : str, optional
+    """
+    n = unique.divergence.size
+    a, b = (0, n) if window is None else (max(0, int(window[0])), min(n, int(window[1])))
+    idx = np.arange(a, b)
+    ax.plot(idx, unique.divergence[a:b], "-", color="0.6", lw=0.6,
+            label="divergence of each scan: sum |spec - o_spec|")
+    score = unique.section_score[a:b]
+    ok = np.isfinite(score)
+    ax.plot(idx[ok], score[ok], "-", color="tab:blue", lw=1.0,
+            label="section score: 2nd smallest divergence in the section")
+    ax.axhline(unique.delta, color="tab:red", ls="--", lw=1.2, label=f"delta = {unique.delta:.0f} m")
+    sel = unique.indices[(unique.indices >= a) & (unique.indices < b)]
+    ax.plot(sel, unique.section_score[sel], "o", color="tab:red", ms=3,
+            label=f"unique poses ({sel.size} here, {unique.count} in all)")
+    ax.set_xlim(a, b - 1)
+    ax.set_xlabel("pose index along the trajectory")
+    ax.set_ylabel("divergence (m)")
+    ax.set_title(title if title is not None else
+                 f"Algorithm 1: a pose is unique when at most 1 scan of its section is within "
+                 f"delta (sub_sec = {unique.sub_sec})")
+    ax.legend(loc="upper left", fontsize=8, framealpha=0.9, ncol=2)
+    ax.grid(alpha=0.3)
+
+
+def plot_unique_poses(ax, grid: OccupancyGrid, log, unique, *, colour: str = "tab:red",
+                      title: str | None = None):
+    """A robot's map with its trajectory and its unique poses (own frame, m)."""
+    plot_grid(ax, grid, title="")
+    ax.plot(log.poses[:, 0], log.poses[:, 1], "-", color="0.5", lw=0.5, alpha=0.8,
+            label="trajectory")
+    p = log.poses[unique.indices]
+    ax.plot(p[:, 0], p[:, 1], "o", color=colour, ms=3.5, mec="k", mew=0.3,
+            label=f"unique poses ({unique.count})")
+    ax.set_title(title if title is not None else
+                 f"{grid.name or 'map'}: where the unique poses are")
+    ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+
+
+def plot_unique_summary(grid: OccupancyGrid, log, unique, *, colour: str = "tab:red"):
+    """Divergence along the trajectory (left) and the unique poses on the map (right)."""
+    fig = _new_figure(15.0, 5.0)
+    ax_d, ax_m = fig.subplots(1, 2, width_ratios=[1.6, 1.0])
+    plot_divergence(ax_d, unique)
+    plot_unique_poses(ax_m, grid, log, unique, colour=colour)
+    return fig
+
+
+def plot_unique_in_world(world: OccupancyGrid, trajectories, unique_list, names=None):
+    """Every robot's unique poses where they truly are in the world (for teaching: the
+    merger never sees the world frame). Distinctive places collect the unique poses of
+    several robots; that is what pairing (eq. 2) relies on.
+
+    Parameters
+    ----------
+    world : OccupancyGrid
+    trajectories : sequence of (P, 3) arrays
+        True world poses of each robot (``RobotRun.trajectory``).
+    unique_list : sequence of UniquePoses
+    names : sequence of str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    names = list(names) if names is not None else [f"robot_{k + 1}" for k in range(len(unique_list))]
+    fig = _new_figure(10.0, 7.0)
+    ax = fig.subplots()
+    plot_grid(ax, world, title="", alpha=0.7)
+    for k, (traj, u) in enumerate(zip(trajectories, unique_list)):
+        p = np.asarray(traj)[u.indices]
+        ax.plot(p[:, 0], p[:, 1], "o", color=robot_colour(k), ms=4, mec="k", mew=0.3, alpha=0.85,
+                label=f"{names[k]}: {u.count} unique poses")
+    ax.set_title("Unique poses of every robot, at their true places in the world")
+    ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+    return fig
+
+
+def plot_rotation_invariance(log, index: int, turn_deg: float):
+    """Why spectra can be compared between robots: turning the robot shifts its scan
+    circularly, which leaves ``|DFT|`` unchanged and moves only the phase.
+
+    Panels: the scan and the scan of the same place with the robot turned by ``turn_deg``
+    (rounded to whole beams); both magnitude spectra; the phase difference per frequency, a
+    straight line whose slope is the turn.
+
+    Parameters
+    ----------
+    log : ScanLog
+        A 360-degree scan log.
+    index : int
+        Which scan.
+    turn_deg : float
+        How far the robot turns (degrees, counter-clockwise).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from .unique_poses import scan_spectra
+
+    if log.field_of_view < 2 * np.pi - 1e-6:
+        raise InputError("rotation invariance holds for 360-degree scans only")
+    r = log.clipped_ranges()[index].astype(float)
+    B = r.size
+    k = int(round(np.radians(turn_deg) / log.angle_increment))
+    # turning the robot by +k beams: what was at beam j + k is now at beam j
+    turned = np.roll(r, -k)
+    deg = np.degrees(log.beam_angles)
+    spec = scan_spectra(np.stack([r, turned]), dc=False)
+    u = np.arange(1, spec.shape[1] + 1)
+    fig = _new_figure(16.0, 4.6)
+    a1, a2, a3 = fig.subplots(1, 3)
+    a1.plot(deg, r, "-", color="tab:blue", lw=1.0, label="scan")
+    a1.plot(deg, turned, "-", color="tab:orange", lw=1.0,
+            label=f"same place, robot turned {np.degrees(k * log.angle_increment):.0f} deg")
+    a1.set_xlabel("beam angle relative to the heading (deg)")
+    a1.set_ylabel("range (m)")
+    a1.set_title("Turning the robot shifts the scan circularly")
+    a1.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    a1.grid(alpha=0.3)
+    a2.plot(u, spec[0], "-", color="tab:blue", lw=2.5, label="|DFT| of the scan")
+    a2.plot(u, spec[1], "--", color="tab:orange", lw=1.2, label="|DFT| of the turned scan")
+    a2.set_xscale("log")
+    a2.set_yscale("log")
+    a2.set_xlabel("frequency u (cycles per turn)")
+    a2.set_ylabel("|DFT(u)| (m)")
+    same = np.abs(spec[0] - spec[1]).max()
+    a2.set_title(f"...and leaves |DFT| unchanged (largest difference {same:.1e} m)")
+    a2.legend(loc="lower left", fontsize=8, framealpha=0.9)
+    a2.grid(alpha=0.3, which="both")
+    F0, F1 = np.fft.rfft(r), np.fft.rfft(turned)
+    nshow = min(40, spec.shape[1])
+    uu = np.arange(1, nshow + 1)
+    dphase = np.angle(F1[1:nshow + 1] / F0[1:nshow + 1])
+    expect = np.angle(np.exp(2j * np.pi * uu * k / B))
+    a3.plot(uu, np.degrees(dphase), "o", color="tab:orange", ms=7, mfc="none", mew=1.5,
+            label="phase of turned - phase of scan")
+    a3.plot(uu, np.degrees(expect), "x", color="k", ms=5,
+            label=f"2 pi u k / B with k = {k} beams (wrapped to +-180)")
+    a3.set_xlabel("frequency u (cycles per turn)")
+    a3.set_ylabel("phase difference (deg)")
+    a3.set_ylim(-190, 190)
+    a3.set_title("The turn is all in the phase, which |DFT| drops")
+    a3.legend(loc="lower left", fontsize=8, framealpha=0.9)
+    a3.grid(alpha=0.3)
+    return fig
+
+
+# -- pairing (eq. 2) -----------------------------------------------------------------------------
+def plot_rho_matrix(ax, unique_list, names, *, theta: float | None = None, title: str | None = None):
+    """Pearson's rho (eq. 2) between every two unique poses of all robots, as a heat map.
+
+    The unique poses of robot 1 come first, then robot 2's, ...; thin lines separate the robots'
+    blocks. With ``theta``, only the agreeing pairs (``rho > theta``) are coloured.
+
+    Returns
+    -------
+    matplotlib.image.AxesImage
+    """
+    from .pairing import pearson_matrix
+
+    spectra = [u.unique_spectra for u in unique_list]
+    S = np.concatenate(spectra)
+    rho = pearson_matrix(S, S)
+    sizes = np.array([len(s) for s in spectra])
+    edges = np.concatenate([[0], np.cumsum(sizes)])
+    if theta is None:
+        im = ax.imshow(rho, cmap="viridis", vmin=max(-1.0, float(np.percentile(rho, 1))), vmax=1.0,
+                       interpolation="nearest", origin="upper")
+        label = "Pearson rho (eq. 2)"
+    else:
+        shown = np.where(rho > theta, rho, np.nan)
+        ax.set_facecolor("0.93")
+        im = ax.imshow(shown, cmap="viridis", vmin=theta, vmax=1.0, interpolation="nearest",
+                       origin="upper")
+        label = f"rho of the agreeing pairs (rho > theta = {theta:g})"
+    for e in edges[1:-1]:
+        ax.axhline(e - 0.5, color="w", lw=1.2)
+        ax.axvline(e - 0.5, color="w", lw=1.2)
+    centres = (edges[:-1] + edges[1:]) / 2 - 0.5
+    ax.set_xticks(centres, [f"{n}\n({s})" for n, s in zip(names, sizes)], fontsize=8)
+    ax.set_yticks(centres, list(names), fontsize=8)
+    ax.set_xlabel("unique pose (grouped by robot; count in brackets)")
+    ax.set_ylabel("unique pose (grouped by robot)")
+    ax.set_title(title if title is not None else label)
+    cb = ax.figure.colorbar(im, ax=ax, shrink=0.85)
+    cb.set_label(label)
+    return im
+
+
+def agreement_curves(unique_list, thetas):
+    """Agreeing unique-pose pairs of every two robots as the threshold varies.
+
+    Returns ``{(a, b): counts}`` with ``counts[i]`` the number of pairs with ``rho > thetas[i]``.
+    """
+    from .pairing import agreement
+
+    out = {}
+    t = np.asarray(thetas, float)
+    for a in range(len(unique_list)):
+        for b in range(a + 1, len(unique_list)):
+            rho = agreement(unique_list[a].unique_spectra, unique_list[b].unique_spectra, 1.0).rho
+            v = np.sort(rho.ravel())
+            out[(a, b)] = v.size - np.searchsorted(v, t, side="right")
+    return out
+
+
+def plot_agreement_curves(ax, unique_list, names, theta: float, *, thetas=None):
+    """How many unique-pose pairs of each two robots agree (rho > theta) as theta varies."""
+    import matplotlib as mpl
+
+    thetas = np.linspace(0.5, 0.995, 100) if thetas is None else np.asarray(thetas)
+    curves = agreement_curves(unique_list, thetas)
+    cmap = mpl.colormaps["tab10"]
+    for i, ((a, b), c) in enumerate(curves.items()):
+        ax.plot(thetas, np.maximum(c, 0.8), "-", color=cmap(i % 10), lw=1.3,
+                label=f"{names[a]} ~ {names[b]}")
+    ax.axvline(theta, color="k", ls="--", lw=1.0, label=f"theta = {theta:g}")
+    ax.set_yscale("log")
+    ax.set_xlabel("threshold theta on Pearson rho")
+    ax.set_ylabel("agreeing unique-pose pairs (rho > theta)")
+    ax.set_title("Agreement of each pair of robots against theta")
+    ax.legend(loc="lower left", fontsize=8, framealpha=0.9, ncol=2)
+    ax.grid(alpha=0.3, which="both")
+
+
+def plot_counts(ax, counts, names, *, title: str | None = None):
+    """The agreement counts between every two robots as an annotated matrix."""
+    c = np.asarray(counts)
+    im = ax.imshow(c, cmap="Blues", interpolation="nearest")
+    for i in range(c.shape[0]):
+        for j in range(c.shape[1]):
+            ax.text(j, i, "-" if i == j else f"{c[i, j]}", ha="center", va="center", fontsize=9,
+                    color="w" if c[i, j] > 0.6 * max(c.max(), 1) else "k")
+    ax.set_xticks(range(len(names)), names, rotation=30, ha="right", fontsize=8)
+    ax.set_yticks(range(len(names)), names, fontsize=8)
+    ax.set_title(title if title is not None else "Agreeing unique-pose pairs (counts)")
+    cb = ax.figure.colorbar(im, ax=ax, shrink=0.8)
+    cb.set_label("pairs with rho > theta")
+
+
+def plot_fusion_plan(ax, plan, names, *, title: str | None = None):
+    """The fusion order as a graph: robots on a circle, grey edges as thick as their agreement
+    count, and numbered arrows for the steps (from the placed map to the map that joins)."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import FancyArrowPatch
+
+    n = len(names)
+    ang = np.pi / 2 - 2 * np.pi * np.arange(n) / n
+    pos = np.column_stack([np.cos(ang), np.sin(ang)])
+    c = np.asarray(plan.counts).copy()
+    np.fill_diagonal(c, 0)
+    cmax = max(int(c.max()), 1)
+    for a in range(n):
+        for b in range(a + 1, n):
+            if c[a, b] > 0:
+                ax.plot(*pos[[a, b]].T, "-", color="0.75", lw=1 + 7 * c[a, b] / cmax, zorder=1,
+                        solid_capstyle="round")
+                m = pos[[a, b]].mean(axis=0)
+                ax.text(*m, f"{c[a, b]}", fontsize=8, color="0.35", ha="center", va="center",
+                        bbox=dict(boxstyle="round,pad=0.15", fc="w", ec="none", alpha=0.8), zorder=2)
+    bend = 0.2
+    for i, (a, b) in enumerate(plan.steps):
+        arr = FancyArrowPatch(pos[a], pos[b], arrowstyle="-|>", mutation_scale=18, lw=2.2,
+                              color="tab:red", shrinkA=18, shrinkB=18, zorder=3,
+                              connectionstyle=f"arc3,rad={bend}")
+        ax.add_patch(arr)
+        d = pos[b] - pos[a]
+        side = np.array([d[1], -d[0]])  # the side matplotlib's arc3 bends to
+        m = pos[[a, b]].mean(axis=0) + 0.5 * bend * side + 0.13 * side / max(np.hypot(*side), 1e-9)
+        ax.text(*m, f"{i + 1}", fontsize=11, color="tab:red", weight="bold", ha="center",
+                va="center", zorder=4)
+    first = plan.steps[0][0] if plan.steps else None
+    for k in range(n):
+        unplaced = k in plan.unplaced
+        ax.scatter(*pos[k], s=900, color="0.85" if unplaced else robot_colour(k),
+                   edgecolors="k", linewidths=3 if k == first else 1, zorder=5)
+        ax.text(*(pos[k] * 1.42), names[k], ha="center", va="center", fontsize=9)
+        ax.text(*pos[k], f"{k + 1}", ha="center", va="center", fontsize=10, color="w",
+                weight="bold", zorder=6)
+    ax.set_xlim(-1.75, 1.75)
+    ax.set_ylim(-1.75, 1.6)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_xlabel("(a graph: positions carry no units)")
+    order = " -> ".join(names[k] for k in plan.order) if plan.steps else "none"
+    ax.set_title(title if title is not None else f"Fusion order: {order}", fontsize=10)
+    handles = [Line2D([], [], color="0.75", lw=4, label="agreement (width = count)"),
+               Line2D([], [], color="tab:red", lw=2, marker=">", label="fusion step k: placed -> joins"),
+               Line2D([], [], color="w", marker="o", mfc="w", mec="k", mew=3, ms=12, ls="",
+                      label="first map (reference of the plan)")]
+    if plan.unplaced:
+        handles.append(Line2D([], [], color="w", marker="o", mfc="0.85", mec="k", ms=12, ls="",
+                              label="agrees with no placed map"))
+    ax.legend(handles=handles, loc="lower center", fontsize=7, framealpha=0.9,
+              bbox_to_anchor=(0.5, -0.02), ncol=2)
+
+
+def plot_rho_overview(unique_list, names, theta: float):
+    """Pearson's rho between all unique poses (left) and only the pairs above ``theta``
+    (right)."""
+    fig = _new_figure(15.0, 6.4)
+    a1, a2 = fig.subplots(1, 2)
+    plot_rho_matrix(a1, unique_list, names, title="Pearson rho (eq. 2) of every two unique poses")
+    plot_rho_matrix(a2, unique_list, names, theta=theta,
+                    title=f"Agreeing pairs: rho > theta = {theta:g} (others grey)")
+    return fig
+
+
+def plot_pairing(unique_list, names, theta: float):
+    """From agreement to fusion order at threshold ``theta``: the agreement of every pair of
+    robots against theta (left), the counts at ``theta`` (middle) and the fusion order
+    (right)."""
+    from .pairing import agreement, fusion_order
+
+    n = len(unique_list)
+    counts = np.zeros((n, n), int)
+    for a in range(n):
+        for b in range(a + 1, n):
+            c = agreement(unique_list[a].unique_spectra, unique_list[b].unique_spectra, theta).count
+            counts[a, b] = counts[b, a] = c
+    plan = fusion_order(counts)
+    fig = _new_figure(17.0, 5.4)
+    a1, a2, a3 = fig.subplots(1, 3, width_ratios=[1.2, 1.0, 1.0])
+    plot_agreement_curves(a1, unique_list, names, theta)
+    plot_counts(a2, counts, names, title=f"Agreeing pairs at theta = {theta:g}")
+    plot_fusion_plan(a3, plan, names)
+    return fig
+
+
+def plot_matches(world: OccupancyGrid, poses_a, poses_b, *, tolerance: float = 1.0,
+                 names=("a", "b"), title: str | None = None, max_lines: int = 400):
+    """Agreeing unique-pose pairs drawn where they truly are in the world (for teaching: the
+    merger never sees this): a line from robot a's pose to robot b's, green when the two poses
+    are within ``tolerance`` m (the same place), red otherwise.
+
+    Parameters
+    ----------
+    world : OccupancyGrid
+    poses_a, poses_b : (M, 2 or 3) array
+        True world positions of the two poses of each agreeing pair.
+    tolerance : float
+        Distance (m) under which a pair counts as the same place.
+    names : (str, str)
+    title : str, optional
+    max_lines : int
+        At most this many red lines are drawn (an even subsample); the counts use all pairs.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.lines import Line2D
+
+    pa = np.asarray(poses_a, float).reshape(-1, np.shape(poses_a)[-1] if np.size(poses_a) else 2)[:, :2]
+    pb = np.asarray(poses_b, float).reshape(-1, np.shape(poses_b)[-1] if np.size(poses_b) else 2)[:, :2]
+    d = np.hypot(*(pa - pb).T) if len(pa) else np.zeros(0)
+    good = d < tolerance
+    fig = _new_figure(10.0, 7.0)
+    ax = fig.subplots()
+    plot_grid(ax, world, title="", alpha=0.6)
+    bad = np.flatnonzero(~good)
+    if bad.size > max_lines:
+        bad = bad[np.linspace(0, bad.size - 1, max_lines).round().astype(int)]
+    for i in bad:
+        ax.plot(*np.stack([pa[i], pb[i]]).T, "-", color="tab:red", lw=0.4, alpha=0.35)
+    for i in np.flatnonzero(good):
+        ax.plot(*np.stack([pa[i], pb[i]]).T, "-", color="tab:green", lw=1.2, alpha=0.9)
+    ax.plot(pb[good, 0], pb[good, 1], "o", color="tab:green", ms=3)
+    frac = float(good.mean()) if len(d) else 0.0
+    ax.set_title(title if title is not None else
+                 f"{len(d)} agreeing pairs {names[0]} ~ {names[1]}, at their true places: "
+                 f"{int(good.sum())} ({100 * frac:.0f}%) are the same place", fontsize=10)
+    ax.legend(handles=[Line2D([], [], color="tab:green", lw=1.5,
+                              label=f"same place (< {tolerance:g} m apart)"),
+                       Line2D([], [], color="tab:red", lw=1, alpha=0.6,
+                              label="alike, but different places" +
+                                    (f" ({max_lines} of {int((~good).sum())} drawn)"
+                                     if (~good).sum() > max_lines else ""))],
+              loc="upper right", fontsize=8, framealpha=0.9)
+    return fig
+
+
+# -- PSO alignment (eqs. 3-4) ------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class CostSurface:
+    """The eq. 3 objective over a ``(dx, dy)`` grid at one ``dphi`` (for drawing).
+
+    ``dx`` (nx,) and ``dy`` (ny,) in metres, ``dphi`` in radians, ``cost`` (ny, nx)."""
+
+    dx: np.ndarray
+    dy: np.ndarray
+    dphi: float
+    cost: np.ndarray
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        hx = (self.dx[1] - self.dx[0]) / 2 if self.dx.size > 1 else 0.5
+        hy = (self.dy[1] - self.dy[0]) / 2 if self.dy.size > 1 else 0.5
+        return (self.dx[0] - hx, self.dx[-1] + hx, self.dy[0] - hy, self.dy[-1] + hy)
+
+
+def cost_surface(field, moving, dphi: float, *, center=(0.0, 0.0), half_width: float = 10.0,
+                 n: int = 121) -> CostSurface:
+    """Evaluate eq. 3 (:func:`~fusionkit.alignment.mse_cost`) on an ``n x n`` grid of
+    ``(dx, dy)`` around ``center`` (m) at a fixed ``dphi`` (rad)."""
+    from .alignment import mse_cost
+
+    dx = center[0] + np.linspace(-half_width, half_width, n)
+    dy = center[1] + np.linspace(-half_width, half_width, n)
+    X, Y = np.meshgrid(dx, dy)
+    params = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, float(dphi))])
+    return CostSurface(dx, dy, float(dphi), mse_cost(field, moving, params).reshape(X.shape))
+
+
+def plot_cost_surface(ax, surface: CostSurface, *, truth=None, colorbar: bool = True,
+                      title: str | None = None):
+    """Draw a :class:`CostSurface` (low cost dark), with the true ``(dx, dy)`` starred."""
+    im = ax.imshow(surface.cost, origin="lower", extent=surface.extent, cmap="magma",
+                   interpolation="nearest", aspect="equal")
+    if truth is not None:
+        ax.plot(truth[0], truth[1], "*", color="cyan", mec="k", ms=16, label="true (dx, dy)")
+        ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+    ax.set_xlabel("dx (m)")
+    ax.set_ylabel("dy (m)")
+    ax.set_title(title if title is not None else
+                 f"MSE of the masks (eq. 3) at dphi = {np.degrees(surface.dphi):.1f} deg")
+    if colorbar:
+        cb = ax.figure.colorbar(im, ax=ax, shrink=0.85)
+        cb.set_label("MSE (eq. 3)")
+    return im
+
+
+def plot_swarm(ax, surface: CostSurface, positions, *, best=None, truth=None,
+               iteration: int | None = None, colorbar: bool = False):
+    """The swarm over the cost surface: each particle at its ``(dx, dy)``, coloured by how far
+    its ``dphi`` is from the surface's (the surface is one slice of the 3-D search space)."""
+    from matplotlib.lines import Line2D
+
+    plot_cost_surface(ax, surface, colorbar=colorbar, title="")
+    p = np.asarray(positions, float)
+    off = np.degrees(np.abs((p[:, 2] - surface.dphi + np.pi) % (2 * np.pi) - np.pi))
+    sc = ax.scatter(p[:, 0], p[:, 1], c=off, cmap="winter_r", vmin=0, vmax=180, s=22,
+                    edgecolors="w", linewidths=0.5, zorder=3)
+    handles = [Line2D([], [], marker="o", color="w", mfc="tab:green", ls="", ms=6,
+                      label="particle (colour: |dphi - slice| 0 green .. 180 deg blue)")]
+    if best is not None:
+        ax.plot(best[0], best[1], "P", color="w", mec="k", ms=13, zorder=4)
+        handles.append(Line2D([], [], marker="P", color="w", mec="k", ls="", ms=10,
+                              label="swarm's best so far"))
+    if truth is not None:
+        ax.plot(truth[0], truth[1], "*", color="cyan", mec="k", ms=15, zorder=4)
+        handles.append(Line2D([], [], marker="*", color="cyan", mec="k", ls="", ms=12,
+                              label="true (dx, dy)"))
+    ax.set_xlim(surface.extent[:2])
+    ax.set_ylim(surface.extent[2:])
+    ax.set_title("swarm" if iteration is None else f"iteration {iteration}")
+    ax.legend(handles=handles, loc="upper right", fontsize=7, framealpha=0.9)
+    return sc
+
+
+def plot_surfaces(surfaces, *, truth=None, titles=None):
+    """Several :class:`CostSurface` side by side (for example the whole search box and a zoom
+    on the true alignment)."""
+    surfaces = list(surfaces)
+    fig = _new_figure(7.0 * len(surfaces), 5.6)
+    axes = np.atleast_1d(fig.subplots(1, len(surfaces)))
+    for i, (ax, sf) in enumerate(zip(axes, surfaces)):
+        plot_cost_surface(ax, sf, truth=truth, title=None if titles is None else titles[i])
+    return fig
+
+
+def _state_at(states, iteration: int):
+    for st in states:
+        if st.iteration == iteration:
+            return st
+    raise InputError(f"no swarm state of iteration {iteration}; recorded iterations are "
+                     f"{states[0].iteration}..{states[-1].iteration}")
+
+
+def plot_swarm_snapshots(surface: CostSurface, states, iterations, *, truth=None,
+                         title: str | None = None):
+    """The swarm at a few iterations, side by side.
+
+    Parameters
+    ----------
+    surface : CostSurface
+    states : sequence of PSOState
+        The swarm after each iteration, as a PSO callback receives it.
+    iterations : sequence of int
+        Which iterations to draw.
+    truth : (dx, dy), optional
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    its = [int(i) for i in iterations]
+    cols = min(len(its), 4)
+    rows = int(np.ceil(len(its) / cols))
+    fig = _new_figure(4.4 * cols, 4.3 * rows + 0.4)
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    for ax, i in zip(axes, its):
+        st = _state_at(states, i)
+        plot_swarm(ax, surface, st.positions, best=st.best_position, truth=truth, iteration=i)
+        ax.set_title(f"iteration {i}: best MSE {st.best_cost:.4f}", fontsize=9)
+        if ax is not axes[0]:
+            ax.get_legend().remove()
+    for ax in axes[len(its):]:
+        ax.set_visible(False)
+    fig.suptitle(title if title is not None else
+                 f"The swarm over the MSE surface at dphi = {np.degrees(surface.dphi):.1f} deg")
+    return fig
+
+
+def plot_pso_run(surface: CostSurface, states, alignment, reference, moving, *, truth=None,
+                 true_cost: float | None = None):
+    """One alignment by PSO: the final swarm over the cost surface, the convergence curve and
+    the masks aligned by the result.
+
+    Parameters
+    ----------
+    surface : CostSurface
+    states : sequence of PSOState
+        The swarm after each iteration (from the callback).
+    alignment : Alignment
+        The result of :func:`~fusionkit.alignment.align_points`.
+    reference, moving : (K, 2), (L, 2) arrays
+        The masks' points (m), each in its own frame.
+    truth : Transform2D, optional
+        The true transform moving -> reference.
+    true_cost : float, optional
+        The MSE at the true alignment, drawn on the convergence curve.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    fig = _new_figure(17.0, 5.3)
+    a1, a2, a3 = fig.subplots(1, 3)
+    last = states[-1]
+    t_xy = None if truth is None else truth.to_paper()[:2]
+    plot_swarm(a1, surface, last.positions, best=last.best_position, truth=t_xy)
+    a1.set_title(f"swarm after {last.iteration} iterations ({len(last.positions)} particles)",
+                 fontsize=10)
+    plot_convergence(a2, {"best MSE of this run": alignment.pso})
+    if true_cost is not None:
+        a2.axhline(true_cost, color="k", ls="--", lw=1.0, label="MSE at the true alignment")
+        a2.legend(loc="upper right", fontsize=8, framealpha=0.9)
+    title = "Masks aligned by the swarm's best"
+    if truth is not None:
+        dt, dr = alignment.transform.error_to(truth)
+        title += f"\nerror {dt:.2f} m, {np.degrees(dr):.1f} deg from the truth"
+    plot_masks(a3, reference, moving, alignment.transform, title=title)
+    return fig
+
+
+def plot_convergence(ax, runs, *, title: str | None = None):
+    """Best cost against iteration for one or more PSO runs.
+
+    ``runs`` maps a label to a :class:`~fusionkit.pso.PSOResult` or a history array."""
+    for i, (label, r) in enumerate(dict(runs).items()):
+        h = np.asarray(getattr(r, "history", r), float)
+        ax.plot(np.arange(h.size), h, "-", lw=1.5, label=label, color=f"C{i}")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("best MSE so far (eq. 3)")
+    ax.set_title(title if title is not None else "Convergence of the swarm")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=8, framealpha=0.9)
+
+
+def plot_masks(ax, reference, moving, transform=None, *, names=("reference", "moving"),
+               colours=("tab:blue", "tab:red"), title: str | None = None):
+    """The two masks (scan end points of the matched unique poses) in the reference frame,
+    the moving one moved by ``transform`` (m)."""
+    ref = np.asarray(reference, float)
+    mov = np.asarray(moving, float)
+    if transform is not None:
+        mov = transform(mov)
+    ax.plot(ref[:, 0], ref[:, 1], ".", color=colours[0], ms=1.5, alpha=0.6,
+            label=f"{names[0]} mask ({len(ref)} points)")
+    ax.plot(mov[:, 0], mov[:, 1], ".", color=colours[1], ms=1.5, alpha=0.6,
+            label=f"{names[1]} mask ({len(mov)} points)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, reference frame)")
+    ax.set_ylabel("y (m, reference frame)")
+    ax.set_title(title if title is not None else "Masks")
+    leg = ax.legend(loc="upper right", fontsize=8, framealpha=0.9, markerscale=6)
+    return leg
+
+
+def plot_mask_panels(reference, moving, transforms, *, names=("reference", "moving")):
+    """The two masks overlaid once per entry of ``transforms`` (``{panel title: Transform2D or
+    None}``; None draws the moving mask as recorded, in its own frame)."""
+    items = list(dict(transforms).items())
+    fig = _new_figure(6.6 * len(items), 6.0)
+    axes = np.atleast_1d(fig.subplots(1, len(items)))
+    for ax, (title, t) in zip(axes, items):
+        plot_masks(ax, reference, moving, t, names=names, title=title)
+    return fig
+
+
+# -- fusion (Section 3.6) and metrics (Table 1) -------------------------------------------------
+def plot_cells(ax, data, *, title: str | None = None):
+    """A small grid drawn cell by cell with its values written in (row 0 at the bottom)."""
+    d = np.asarray(data)
+    img = np.full(d.shape, _SHADE_UNKNOWN)
+    img[(d >= 0) & (d < 50)] = _SHADE_FREE
+    img[d >= 50] = _SHADE_OCCUPIED
+    ax.imshow(img, origin="lower", cmap="gray", vmin=0, vmax=1, interpolation="nearest")
+    names = {-1: "unk", 0: "free", 100: "occ"}
+    for r in range(d.shape[0]):
+        for c in range(d.shape[1]):
+            v = int(d[r, c])
+            ax.text(c, r, names.get(v, str(v)), ha="center", va="center", fontsize=8,
+                    color="w" if v >= 50 else "k")
+    ax.set_xticks(range(d.shape[1]))
+    ax.set_yticks(range(d.shape[0]))
+    ax.set_xticks(np.arange(d.shape[1] + 1) - 0.5, minor=True)
+    ax.set_yticks(np.arange(d.shape[0] + 1) - 0.5, minor=True)
+    ax.grid(which="minor", color="0.5", lw=0.8)
+    ax.tick_params(which="minor", length=0)
+    ax.set_xlabel("column j (cells)")
+    ax.set_ylabel("row i (cells)")
+    if title:
+        ax.set_title(title)
+
+
+def plot_cell_fusion(m1, m2, fused, *, names=("M1", "M2", "M_fusion")):
+    """Two small co-registered maps and their fusion, cell by cell (Section 3.6)."""
+    fig = _new_figure(13.5, 4.2)
+    axes = fig.subplots(1, 3)
+    for ax, d, name in zip(axes, (m1, m2, fused), names):
+        plot_cells(ax, d, title=name)
+    state_legend(axes[2], loc="upper left", fontsize=7)
+    axes[2].get_legend().set_bbox_to_anchor((1.02, 1.0))
+    return fig
+
+
+def plot_fusion_steps(fused, names=None, *, metrics=None, title: str | None = None):
+    """The fused map growing: one panel per step (``M1``, ``M1,2``, ...), cells tinted by the
+    robot that first saw them; with ``metrics`` (one :class:`~fusionkit.metrics.MapMetrics`
+    per step) the completeness and precision are in the panels' titles."""
+    from .metrics import table1_label
+
+    steps = fused.steps
+    if not steps:
+        raise InputError("this FusedMap kept no steps; fuse with keep_steps=True")
+    n = len(steps)
+    cols = min(n, 3)
+    rows = int(np.ceil(n / cols))
+    g = fused.grid
+    aspect = g.rows / max(g.cols, 1)
+    fig = _new_figure(5.2 * cols, 5.2 * cols * aspect / cols * rows + 0.9)
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    order = list(fused.order)
+    names = list(names) if names is not None else [f"robot_{k + 1}" for k in range(max(order) + 1)]
+    for i, ax in enumerate(axes[:n]):
+        t = f"{table1_label(i)}: + {names[order[i]]}"
+        if metrics is not None:
+            m = metrics[i]
+            t += f"\ncompleteness {m.completeness:.1f}%, precision {m.precision:.1f}%"
+        plot_fused(ax, fused, names, step=i, title=t, legend=(i == n - 1))
+        ax.title.set_fontsize(9)
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    fig.suptitle(title if title is not None else
+                 "The fused map growing, one map per step (free cells tinted by the robot that first saw them)")
+    return fig
+
+
+_METRICS = (("completeness", "Completeness"), ("accuracy", "Accuracy"),
+            ("precision", "Precision"), ("efficiency", "Efficiency"))
+
+
+def plot_table1(rows, *, oracle=None, paper: bool = True, title: str | None = None):
+    """The paper's Table 1 as bars, like its Fig. 5: one panel per metric, one group of bars
+    per fusion step (``M1``, ``M1,2``, ...): fusionkit, the oracle (true transforms) and the
+    paper's published values.
+
+    Parameters
+    ----------
+    rows : sequence of MapMetrics
+    oracle : sequence of MapMetrics, optional
+    paper : bool
+        Add :data:`~fusionkit.metrics.PAPER_TABLE1`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from .metrics import PAPER_TABLE1, table1_label
+
+    series = [("fusionkit", list(rows), "tab:blue")]
+    if oracle is not None:
+        series.append(("oracle (true transforms)", list(oracle), "tab:green"))
+    if paper:
+        series.append(("paper, Table 1", list(PAPER_TABLE1), "0.55"))
+    n = max(len(s[1]) for s in series)
+    labels = [table1_label(k) for k in range(n)]
+    fig = _new_figure(15.0, 4.6)
+    axes = fig.subplots(1, 4, sharey=True)
+    width = 0.8 / len(series)
+    x = np.arange(n)
+    for ax, (key, name) in zip(axes, _METRICS):
+        for j, (lab, data, colour) in enumerate(series):
+            vals = [getattr(data[k], key) if k < len(data) else np.nan for k in range(n)]
+            ax.bar(x + (j - (len(series) - 1) / 2) * width, vals, width, color=colour,
+                   edgecolor="k", linewidth=0.4, label=lab)
+        ax.set_xticks(x, labels, rotation=35, ha="right", fontsize=8)
+        ax.set_title(name)
+        ax.set_xlabel("fused maps")
+        ax.set_ylim(0, 105)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_ylabel("percent (%)")
+    axes[0].legend(loc="lower left", fontsize=8, framealpha=0.95)
+    fig.suptitle(title if title is not None else
+                 "Table 1 as bars (the paper's Fig. 5): each metric after each fusion step")
+    return fig
+
+
+__all__ += ["robot_colour", "owner_image", "plot_fused", "plot_merge", "plot_scan", "plot_drift",
+            "plot_section_spectra", "plot_divergence", "plot_unique_poses", "plot_unique_summary",
+            "plot_rotation_invariance", "plot_rho_matrix", "agreement_curves",
+            "plot_agreement_curves", "plot_counts", "plot_fusion_plan", "plot_matches",
+            "CostSurface", "cost_surface", "plot_cost_surface", "plot_swarm",
+            "plot_swarm_snapshots", "plot_convergence", "plot_masks", "plot_cells",
+            "plot_cell_fusion", "plot_fusion_steps", "plot_table1", "state_legend", "plot_worlds",
+            "plot_unique_in_world", "plot_rho_overview", "plot_pairing", "plot_surfaces",
+            "plot_pso_run", "plot_mask_panels"]

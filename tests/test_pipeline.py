@@ -175,3 +175,16 @@ def test_maps_without_scans_merge_by_virtual_scans(sim):
     if p.merged:   # a confident placement must be right; a refusal is allowed
         dt, dr = p.transform.error_to(_true_relative(sim, 1))
         assert dt < 3 * sim.world.resolution and math.degrees(dr) < 2.0
+
+
+def test_a_map_of_another_resolution_is_resampled_to_the_reference(sim):
+    from fusionkit.resample import canvas_for, resample
+    b = sim.robots[1].grid
+    fine = resample(b, Transform2D.identity(), canvas_for([b], [Transform2D.identity()], 0.05))
+    res = merge([sim.robots[0].grid, fine], scans=[sim.robots[0].scans, sim.robots[1].scans],
+                config=MergeConfig(seed=2))
+    assert res.grid.resolution == sim.robots[0].grid.resolution
+    p = res.placements[1]
+    assert p.merged
+    dt, dr = p.transform.error_to(_true_relative(sim, 1))
+    assert dt < 3 * sim.world.resolution and math.degrees(dr) < 2.0

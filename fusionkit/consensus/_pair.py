@@ -12,7 +12,7 @@ from ..errors import InputError
 from ..transform import Transform2D
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
-from ._search import EvidenceRaster, rotation_candidates, translation_candidates
+from ._search import Correlator, EvidenceRaster, rotation_candidates
 from ._verify import Check, refine_icp, refine_pso, verify
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
@@ -30,9 +30,12 @@ class ConsensusConfig:
         Least number of wall cells of each map that must land where the other map is known.
     max_conflict : float
         Largest fraction of wall cells allowed on the other map's clear free space.
+    rival : float
+        A second, distinct placement that passes the thresholds with a quality
+        (:meth:`Check.quality`) of at least ``rival`` times the best one's makes the pair
+        ambiguous: it is then only merged when a loop through a third map decides.
     margin : float
-        A second, distinct placement whose score is within ``margin`` of the best one makes
-        the pair ambiguous: it is then only merged when a loop through a third map decides.
+        Slack (score) of the cross checks between placed maps.
     distinct_cells : float
         Two placements are distinct when some corner of the moving map's known area moves by
         more than this many cells between them.
@@ -68,6 +71,7 @@ class ConsensusConfig:
     accept: float = 0.9
     min_overlap_cells: int = 100
     max_conflict: float = 0.03
+    rival: float = 0.6
     margin: float = 0.04
     distinct_cells: float = 6.0
     rotation_peaks: int = 4
@@ -87,8 +91,8 @@ class ConsensusConfig:
     def __post_init__(self):
         if not 0.0 < self.accept <= 1.0:
             raise InputError(f"accept is a verification score in (0, 1], got {self.accept}")
-        if not 0.0 <= self.max_conflict <= 1.0 or not 0.0 <= self.margin <= 1.0:
-            raise InputError("max_conflict and margin are fractions in [0, 1]")
+        if not 0.0 <= self.max_conflict <= 1.0 or not 0.0 <= self.margin <= 1.0 or not 0.0 < self.rival <= 1.0:
+            raise InputError("max_conflict and margin are fractions in [0, 1], rival in (0, 1]")
         for name in ("min_overlap_cells", "rotation_peaks", "translations", "refine_top",
                      "scan_clusters", "max_poses", "max_refine_points"):
             v = getattr(self, name)
@@ -112,8 +116,8 @@ class Candidate:
 
     @property
     def rank(self) -> float:
-        """Ordering key: agreement minus the fraction of conflicting walls."""
-        return self.check.score - self.check.conflict_fraction
+        """Ordering key: :meth:`Check.quality`."""
+        return self.check.quality()
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,6 +139,8 @@ class PairResult:
     plausible : tuple of Candidate
         Every distinct candidate that passes the thresholds, best first.
     best : Candidate or None
+    refined : tuple of Candidate
+        Every distinct candidate refined and verified, best first.
     candidates : int
         Hypotheses refined.
     hypotheses : int
@@ -152,6 +158,7 @@ class PairResult:
     ambiguous: bool
     plausible: tuple = ()
     best: Candidate | None = None
+    refined: tuple = ()
     candidates: int = 0
     hypotheses: int = 0
     reason: str = ""
@@ -197,9 +204,9 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
             if all(abs(math.remainder(c.transform.theta - r, 2 * math.pi)) > math.radians(2) for r in rots):
                 rots.append(c.transform.theta)
     wall: list[tuple[float, Transform2D]] = []
+    corr = Correlator(evidence_a, b.points)
     for th in rots:
-        wall += [(s, t) for t, s in translation_candidates(evidence_a, b.points, th,
-                                                             count=cfg.translations)]
+        wall += [(s, t) for t, s in corr.translations(th, count=cfg.translations)]
     wall.sort(key=lambda st: -st[0])
     starts += [(t, "walls") for _, t in wall[: cfg.refine_top]]
 
@@ -221,7 +228,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         t = refine_pso(a.points, b.refine_points, best.transform, res, seed=seed)
         t = refine_icp(a, b.refine_points, t, gates=(3.0, 2.0))
         chk = verify(a, b, t)
-        if chk.score - chk.conflict_fraction >= best.rank:
+        if chk.quality() >= best.rank:
             best = Candidate(t, chk, best.source)
             refined[0] = best
     plausible = []
@@ -230,7 +237,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                                             > cfg.distinct_cells * res for p in plausible):
             plausible.append(c)
     ok = _plausible(best.check, cfg)
-    rivals = [c for c in plausible[1:] if c.check.score >= best.check.score - cfg.margin]
+    rivals = [c for c in plausible[1:] if c.rank >= cfg.rival * best.rank]
     accepted = ok and not rivals
     chk = best.check
     if accepted:
@@ -247,6 +254,6 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         reason = (f"best placement puts {100 * chk.conflict_fraction:.1f}% of the walls on open "
                   f"floor (allows {100 * cfg.max_conflict:.1f}%)")
     return PairResult(ia, ib, best.transform, float(chk.score), bool(accepted), bool(ok and rivals),
-                      tuple(plausible), best, len(starts), n_hyp, reason,
+                      tuple(plausible), best, tuple(refined), len(starts), n_hyp, reason,
                       time.perf_counter() - t0,
                       {"rotations": len(rots), "check": chk.as_dict()})

@@ -205,8 +205,12 @@ class Check:
         Those fractions for B's walls in A and for A's walls in B.
     overlap : int
         The smaller of the two counts of wall cells landing where the other map is known.
+    agreeing : int
+        Wall cells (both directions) within one cell of the other map's walls.
+    disagreeing : int
+        Wall cells (both directions) where the other map is known but has no wall within one cell.
     conflicts : int
-        Wall cells (both directions) on the other map's clear free space.
+        Of those, the ones on the other map's clear free space (three cells or more from a wall).
     conflict_fraction : float
         ``conflicts`` over the wall cells counted in both directions.
     """
@@ -215,12 +219,21 @@ class Check:
     agree_ab: float
     agree_ba: float
     overlap: int
+    agreeing: int
+    disagreeing: int
     conflicts: int
     conflict_fraction: float
+
+    def quality(self, weight: float = 10.0) -> float:
+        """Evidence for the placement: agreeing wall cells minus ``weight`` per disagreeing one.
+        A placement that fits a large overlap with a few percent of noise outranks one that fits
+        a small patch perfectly, and a shift along repeated structure loses by its misfits."""
+        return self.agreeing - weight * self.disagreeing
 
     def as_dict(self) -> dict:
         return {"score": round(self.score, 4), "agree_ab": round(self.agree_ab, 4),
                 "agree_ba": round(self.agree_ba, 4), "overlap": self.overlap,
+                "agreeing": self.agreeing, "disagreeing": self.disagreeing,
                 "conflicts": self.conflicts, "conflict_fraction": round(self.conflict_fraction, 4)}
 
 
@@ -241,5 +254,6 @@ def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:
     f_ab = near_ab / n_ab if n_ab else 0.0
     f_ba = near_ba / n_ba if n_ba else 0.0
     total = n_ab + n_ba
-    return Check(min(f_ab, f_ba), f_ab, f_ba, min(n_ab, n_ba), bad_ab + bad_ba,
+    return Check(min(f_ab, f_ba), f_ab, f_ba, min(n_ab, n_ba), near_ab + near_ba,
+                 (n_ab - near_ab) + (n_ba - near_ba), bad_ab + bad_ba,
                  (bad_ab + bad_ba) / total if total else 1.0)

@@ -9,7 +9,7 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
-from textual.widgets import Button, Input, Label, Static
+from textual.widgets import Button, Input, Static
 
 from fusionkit.errors import InputError
 
@@ -61,7 +61,8 @@ class ExportScreen(ModalScreen[str | None]):
 
     def compose(self) -> ComposeResult:
         with Vertical():
-            yield Label("Export the merged map (ROS map_server YAML + PGM) and the merge report")
+            yield Static("Export the merged map (ROS map_server YAML + PGM) and the merge report",
+                         id="export-title")
             yield Input(self._default, id="export-path", placeholder="path/to/merged.yaml")
             yield Static("", id="export-files")
             yield Static("", id="export-error")

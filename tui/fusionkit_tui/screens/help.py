@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from rich.table import Table
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.binding import Binding
@@ -16,26 +15,26 @@ __all__ = ["HelpScreen", "KEYS"]
 KEYS = (
     ("Everywhere", (
         ("1 2 3 4", "show the Maps, Settings, Run or Result tab"),
-        ("r  ctrl+r", "run the merge (ctrl+r also works while typing a setting)"),
+        ("r  ctrl+r", "run the merge (ctrl+r also while typing a setting)"),
         ("escape", "cancel the running merge"),
-        ("e", "export the merged map (YAML + PGM) and its report"),
+        ("e", "export the merged map (YAML + PGM) and the report"),
         ("? f1", "this help"),
         ("tab shift+tab", "move between the parts of a tab"),
         ("q  ctrl+q", "quit (a running merge is cancelled)"),
     )),
     ("Maps: directory tree", (
         ("up down", "move; a highlighted map is previewed"),
-        ("enter space", "select / unselect the map; open / close a directory"),
-        ("a", "add every robot map of the highlighted directory"),
+        ("enter space", "select / unselect a map; open / close a directory"),
+        ("a", "add every robot map of the directory"),
         ("u backspace", "go up to the parent directory"),
     )),
     ("Maps: selected maps", (
         ("delete x", "remove the map from the selection"),
-        ("f", "make it the reference (the merged map is in its frame)"),
+        ("f", "make it the reference (the merged frame)"),
     )),
     ("Result", (
-        ("up down", "pick a map: why it was or was not merged"),
-        ("v", "fused map in robot colours / in plain states"),
+        ("up down", "pick a map: why it was merged or not"),
+        ("v", "fused map in robot colours / plain states"),
     )),
 )
 
@@ -66,16 +65,18 @@ class HelpScreen(ModalScreen[None]):
     BINDINGS = [Binding("escape,question_mark,f1,q,enter", "close", "Close")]
 
     def compose(self) -> ComposeResult:
-        table = Table.grid(padding=(0, 2))
-        table.add_column(style="bold", no_wrap=True)
-        table.add_column()
-        for group, keys in KEYS:
-            table.add_row(Text(group, style="underline"), "")
+        text = Text()
+        for g, (group, keys) in enumerate(KEYS):
+            if g:
+                text.append("\n")
+            text.append(f"{group}\n", style="bold underline")
             for k, what in keys:
-                table.add_row(k, what)
+                text.append(f"  {k:<15}", style="bold")
+                text.append(f"{what}\n")
         with VerticalScroll():
-            yield Label("fusionkit: keys", id="help-title")
-            yield Static(table)
+            yield Label("fusionkit: keys (escape closes)", id="help-title")
+            text.rstrip()
+            yield Static(text)
             yield Static(Text("The mouse works too: click tabs, maps and buttons. "
                               "escape closes this help.", style="dim"))
 

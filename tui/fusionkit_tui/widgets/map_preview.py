@@ -52,26 +52,35 @@ def _starts(n: int, out: int) -> np.ndarray:
     return np.floor(np.arange(out) * (n / out)).astype(np.intp)
 
 
+def _block_sum(a: np.ndarray, rs: np.ndarray, cs: np.ndarray) -> np.ndarray:
+    """Sum of ``a`` over each block (rows from ``rs``, columns from ``cs``)."""
+    return np.add.reduceat(np.add.reduceat(a, rs, axis=0), cs, axis=1)
+
+
 def downsample(grid: OccupancyGrid, width: int, height: int,
                owner: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """Shrink (or enlarge) a grid to at most ``width`` x ``height`` pixels, keeping its aspect.
+
+    A pixel covering a block of ``n`` cells (about ``k = sqrt(n)`` on a side) is occupied when
+    at least ``max(1, 0.8 k)`` of them are occupied (a wall across the block, not one clipping
+    its corner), else free when
+    at least half of them are known, else unknown. At one cell per pixel this is the map itself.
 
     Parameters
     ----------
     grid : OccupancyGrid
     width, height : int
-        Largest output size in pixels (columns, rows); each pixel is one map cell or a block
-        of them.
+        Largest output size in pixels (columns, rows).
     owner : (rows, cols) int array, optional
         Per cell, the index of the map that contributed it (-1 none).
 
     Returns
     -------
     rank : (h, w) int8 array
-        Per pixel, ``0`` unknown, ``1`` free, ``2`` occupied: the strongest state in its block.
-        Row 0 is the *top* of the picture (highest y).
+        Per pixel, ``0`` unknown, ``1`` free, ``2`` occupied. Row 0 is the *top* of the
+        picture (highest y).
     owners : (h, w) int array or None
-        Per pixel, the contributing map of a cell of that strongest state (-1 none).
+        Per pixel, the map that contributed most of its known cells (-1 none).
     """
     data = grid.trinary()[::-1]  # row 0 of the picture = highest y
     rows, cols = data.shape
@@ -79,18 +88,25 @@ def downsample(grid: OccupancyGrid, width: int, height: int,
     scale = max(rows / height, cols / width)
     out_w = max(1, min(width, int(np.ceil(cols / scale - 1e-9))))
     out_h = max(1, min(height, int(np.ceil(rows / scale - 1e-9))))
-    rank = np.where(data >= 50, OCCUPIED_RANK, np.where(data >= 0, FREE_RANK, UNKNOWN_RANK)).astype(np.int32)
-    if owner is not None:
-        own = np.asarray(owner)[::-1].astype(np.int32) + 1  # 0 = nobody
-        m = int(own.max()) + 1
-        key = rank * m + own
-    else:
-        m, key = 1, rank
     rs, cs = _starts(rows, out_h), _starts(cols, out_w)
-    key = np.maximum.reduceat(np.maximum.reduceat(key, rs, axis=0), cs, axis=1)
-    out_rank = (key // m).astype(np.int8)
-    owners = (key % m - 1) if owner is not None else None
-    return out_rank, owners
+    occ = (data >= 50).astype(np.int32)
+    known = (data >= 0).astype(np.int32)
+    n = _block_sum(np.ones_like(occ), rs, cs)
+    occ_n = _block_sum(occ, rs, cs)
+    known_n = _block_sum(known, rs, cs)
+    rank = np.full(n.shape, UNKNOWN_RANK, np.int8)
+    rank[2 * known_n >= n] = FREE_RANK
+    rank[(occ_n >= np.maximum(1.0, 0.8 * np.sqrt(n))) & (occ_n > 0)] = OCCUPIED_RANK
+    if owner is None:
+        return rank, None
+    own = np.asarray(owner)[::-1]
+    owners = np.full(n.shape, -1, np.int32)
+    best = np.zeros(n.shape, np.int32)
+    for k in np.unique(own[own >= 0]):
+        count = _block_sum((own == k).astype(np.int32), rs, cs)
+        better = count > best
+        owners[better], best[better] = int(k), count[better]
+    return rank, owners
 
 
 def _pixel_colours(rank: np.ndarray, owners: np.ndarray | None) -> np.ndarray:

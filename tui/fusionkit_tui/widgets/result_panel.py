@@ -25,15 +25,16 @@ class ResultPanel(Vertical):
     DEFAULT_CSS = """
     ResultPanel {
         height: 1fr;
+        padding: 0 1;
     }
-    ResultPanel > Horizontal {
+    ResultPanel #bottom {
         height: 1fr;
     }
     ResultPanel #fused {
-        width: 2fr;
+        width: 1fr;
     }
-    ResultPanel #tables {
-        width: 3fr;
+    ResultPanel #scores {
+        width: 40;
         padding-left: 1;
     }
     ResultPanel .heading {
@@ -47,11 +48,8 @@ class ResultPanel(Vertical):
     }
     ResultPanel DataTable {
         height: auto;
-        max-height: 9;
+        max-height: 8;
         background: $surface;
-    }
-    ResultPanel #metrics-heading {
-        margin-top: 1;
     }
     """
 
@@ -64,15 +62,15 @@ class ResultPanel(Vertical):
         self._by_robot = True
 
     def compose(self) -> ComposeResult:
-        with Horizontal():
+        yield Label("Maps: transform into the reference frame", classes="heading")
+        yield DataTable(id="placements", cursor_type="row")
+        yield Static("", id="why")
+        with Horizontal(id="bottom"):
             with Vertical(id="fused"):
                 yield Label("Fused map", id="fused-heading", classes="heading")
                 yield MapPreview(id="fused-map")
                 yield Static("", id="legend")
-            with Vertical(id="tables"):
-                yield Label("Maps: transform into the reference frame", classes="heading")
-                yield DataTable(id="placements", cursor_type="row")
-                yield Static("", id="why")
+            with Vertical(id="scores"):
                 yield Label("Table 1 metrics (%)", id="metrics-heading", classes="heading")
                 yield DataTable(id="metrics", cursor_type="none")
                 yield Static("", id="no-metrics")
@@ -91,9 +89,9 @@ class ResultPanel(Vertical):
         self._draw_map()
         table = self.query_one("#placements", DataTable)
         table.clear(columns=True)
-        cols = ["map", "merged", "conf", "x (m)", "y (m)", "th (deg)"]
+        cols = ["map", "merged", "conf", "x (m)", "y (m)", "θ (°)"]
         if evaluation is not None:
-            cols += ["err (m)", "err (deg)"]
+            cols += ["error (m)", "error (°)"]
         table.add_columns(*cols)
         for p in result.placements:
             name = Text(self._names[p.index], style=robot_colour(p.index) if p.merged else "dim")

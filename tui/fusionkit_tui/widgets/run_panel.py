@@ -62,6 +62,8 @@ class RunPanel(Vertical):
         self._stage = ""
         self._iterations = 0
         self._step = -1
+        self._phase = 0
+        self._last_iteration = -1
 
     def compose(self) -> ComposeResult:
         yield Static("", id="stages")
@@ -124,11 +126,18 @@ class RunPanel(Vertical):
         if ev.stage == "align":
             if self._stage != "align" or ev.step != self._step:
                 self.plot.start(ev.label)
-                self._step = ev.step
+                self._step, self._phase, self._last_iteration = ev.step, 0, -1
             if ev.iteration is not None:
+                if ev.iteration <= self._last_iteration:
+                    # a second swarm of the same alignment (the local refinement): its own line
+                    self._phase += 1
+                    self.plot.start(f"{ev.label} refine" if self._phase == 1
+                                    else f"{ev.label} ({self._phase + 1})")
+                self._last_iteration = ev.iteration
                 self.plot.add(ev.iteration, ev.best_cost)
-                detail.update(f"aligning {ev.label}: iteration {ev.iteration} of at most "
-                              f"{self._iterations}, best cost {ev.best_cost:.5f}")
+                phase = "refining" if self._phase else "aligning"
+                detail.update(f"{phase} {ev.label}: iteration {ev.iteration} of at most "
+                              f"{self._iterations}, best cost {ev.best_cost:.5g}")
             else:
                 detail.update(f"aligning {ev.label}")
             after = ev.total - ev.step - 1

@@ -7,14 +7,14 @@ Each value is checked as it is typed (the field turns red and the hint says what
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from rich.text import Text
 from textual import on
 from textual.app import ComposeResult
 from textual.containers import Grid, VerticalScroll
 from textual.validation import ValidationResult, Validator
-from textual.widgets import Input, Label, Select, Static
+from textual.widgets import Checkbox, Input, Label, Select, Static
 
 from fusionkit.errors import InputError
 from fusionkit.pipeline import METHODS, MergeConfig
@@ -131,7 +131,7 @@ class SettingsForm(VerticalScroll):
     }
     SettingsForm > Grid {
         grid-size: 3;
-        grid-columns: 14 12 1fr;
+        grid-columns: 13 19 1fr;
         grid-rows: 1;
         grid-gutter: 0 1;
         height: auto;
@@ -148,6 +148,9 @@ class SettingsForm(VerticalScroll):
         background: $error 35%;
     }
     SettingsForm Select {
+        width: 100%;
+    }
+    SettingsForm Checkbox {
         width: 100%;
     }
     SettingsForm .hint {
@@ -173,13 +176,18 @@ class SettingsForm(VerticalScroll):
             yield Label("method")
             yield Select([(m, m) for m in METHODS], value=MergeConfig().method, allow_blank=False,
                          compact=True, id="method")
-            yield Static("DFT unique poses + Pearson pairing + PSO", classes="hint")
+            yield Static(f"default {MergeConfig().method}: the paper's DFT + Pearson + PSO",
+                         classes="hint")
             for s in SETTINGS:
                 yield Label(s.label)
                 yield Input(_default_text(s), id=f"set-{s.key}", compact=True, valid_empty=s.optional,
                             validators=[_SettingValidator(s)], select_on_focus=False)
                 default = "blank" if s.default is None else _default_text(s)
-                yield Static(f"{s.help} (default {default})", id=f"hint-{s.key}", classes="hint")
+                yield Static(f"default {default}: {s.help}", id=f"hint-{s.key}", classes="hint")
+            yield Label("seeding")
+            yield Checkbox("on", MergeConfig().alignment.seeded, id="seeding", compact=True)
+            yield Static("default on: start the swarm also at the transforms of matched scans; "
+                         "off: the paper's blind search", classes="hint")
         yield Static("tab / shift+tab move between fields; invalid values are shown in red and "
                      "block the run.", id="settings-note")
 
@@ -190,7 +198,7 @@ class SettingsForm(VerticalScroll):
             hint.update(Text(f"{failure}", style=""))
             hint.add_class("-invalid")
         else:
-            hint.update(f"{s.help} (default {default})")
+            hint.update(f"default {default}: {s.help}")
             hint.remove_class("-invalid")
 
     @on(Input.Changed)
@@ -207,14 +215,15 @@ class SettingsForm(VerticalScroll):
         self.query_one(f"#set-{key}", Input).value = text
 
     def values(self) -> dict:
-        """The settings as ``{key: value}`` (plus ``method``).
+        """The settings as ``{key: value}`` (plus ``method`` and ``seeded``).
 
         Raises
         ------
         InputError
             For the first field that holds an invalid value.
         """
-        out = {"method": self.query_one("#method", Select).value}
+        out = {"method": self.query_one("#method", Select).value,
+               "seeded": self.query_one("#seeding", Checkbox).value}
         for s in SETTINGS:
             out[s.key] = parse_setting(s, self.query_one(f"#set-{s.key}", Input).value)
         return out
@@ -231,5 +240,8 @@ class SettingsForm(VerticalScroll):
         cfg = MergeConfig(method=v["method"], theta=v["theta"], unique_count=v["unique_count"],
                           delta=v["delta"], sub_sec=v["sub_sec"], accept=v["accept"],
                           reference=reference, seed=v["seed"])
-        return cfg.with_pso(particles=v["particles"], iterations=v["iterations"], w=v["w"],
-                            c1=v["c1"], c2=v["c2"])
+        cfg = cfg.with_pso(particles=v["particles"], iterations=v["iterations"], w=v["w"],
+                           c1=v["c1"], c2=v["c2"])
+        if v["seeded"] != cfg.alignment.seeded:
+            cfg = replace(cfg, alignment=replace(cfg.alignment, seeded=v["seeded"]))
+        return cfg

@@ -20,14 +20,13 @@ Regenerate the default map files with::
 from __future__ import annotations
 
 import math
-import sys
 
 import numpy as np
 from scipy import ndimage
 
-from .errors import InputError
-from .grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from .mapping import MAX_CELLS
+from ..errors import InputError
+from ..grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from ..mapping import MAX_CELLS
 
 __all__ = ["make_office", "make_warehouse", "make_cave", "make_world", "WORLDS",
            "DEFAULT_SIZE", "DEFAULT_RESOLUTION", "default_world"]
@@ -465,9 +464,3 @@ def default_world() -> OccupancyGrid:
     """The default world of ``fusionkit simulate``: the office with seed 0 at the default size
     and resolution (the same grid as ``maps/office.yaml``)."""
     return make_office(0, DEFAULT_SIZE, DEFAULT_RESOLUTION)
-
-
-if __name__ == "__main__":
-    from .cli._worlds import main
-
-    sys.exit(main())
