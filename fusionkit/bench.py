@@ -278,12 +278,14 @@ class Case:
 
 
 def plan_cases(worlds: Sequence[WorldSpec], config: BenchConfig) -> list[CaseSpec]:
-    """The suite: worlds x modes x robots, interleaved and cycled, one seed per case."""
+    """The suite: case ``i`` takes world ``i mod W``, mode ``(i // W) mod M`` and K
+    ``(i + i // (W M)) mod R`` (so every world meets every mode and K as the suite grows), and a
+    seed drawn from the suite's seed and ``i``."""
     W, M, R = len(worlds), len(config.modes), len(config.robots)
     out = []
     for i in range(config.cases):
         out.append(CaseSpec(i, worlds[i % W], config.modes[(i // W) % M],
-                            config.robots[(i // (W * M)) % R],
+                            config.robots[(i + i // (W * M)) % R],
                             int(np.random.SeedSequence([config.seed, i]).generate_state(1)[0] % 2**31)))
     return out
 

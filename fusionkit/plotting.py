@@ -918,16 +918,22 @@ def plot_cost_surface(ax, surface: CostSurface, *, truth=None, colorbar: bool = 
 def plot_swarm(ax, surface: CostSurface, positions, *, best=None, truth=None,
                iteration: int | None = None, colorbar: bool = False):
     """The swarm over the cost surface: each particle at its ``(dx, dy)``, coloured by how far
-    its ``dphi`` is from the surface's (the surface is one slice of the 3-D search space)."""
+    its ``dphi`` is from the surface's (the surface is one slice of the 3-D search space).
+
+    ``colorbar`` adds the particles' colour scale to the axes. Returns the particles'
+    ``PathCollection`` (for a colour bar shared by several axes)."""
     from matplotlib.lines import Line2D
 
-    plot_cost_surface(ax, surface, colorbar=colorbar, title="")
+    plot_cost_surface(ax, surface, colorbar=False, title="")
     p = np.asarray(positions, float)
     off = np.degrees(np.abs((p[:, 2] - surface.dphi + np.pi) % (2 * np.pi) - np.pi))
-    sc = ax.scatter(p[:, 0], p[:, 1], c=off, cmap="winter_r", vmin=0, vmax=180, s=22,
-                    edgecolors="w", linewidths=0.5, zorder=3)
-    handles = [Line2D([], [], marker="o", color="w", mfc="tab:green", ls="", ms=6,
-                      label="particle (colour: |dphi - slice| 0 green .. 180 deg blue)")]
+    sc = ax.scatter(p[:, 0], p[:, 1], c=off, cmap="winter_r", vmin=0, vmax=180, s=26,
+                    edgecolors="w", linewidths=0.6, zorder=3)
+    if colorbar:
+        cb = ax.figure.colorbar(sc, ax=ax, shrink=0.85)
+        cb.set_label("particle's dphi off the slice's (deg)")
+    handles = [Line2D([], [], marker="o", color="w", mfc="tab:green", mec="w", ls="", ms=6,
+                      label="particle")]
     if best is not None:
         ax.plot(best[0], best[1], "P", color="w", mec="k", ms=13, zorder=4)
         handles.append(Line2D([], [], marker="P", color="w", mec="k", ls="", ms=10,
@@ -981,18 +987,21 @@ def plot_swarm_snapshots(surface: CostSurface, states, iterations, *, truth=None
     matplotlib.figure.Figure
     """
     its = [int(i) for i in iterations]
-    cols = min(len(its), 4)
+    cols = min(len(its), 3)
     rows = int(np.ceil(len(its) / cols))
-    fig = _new_figure(4.4 * cols, 4.3 * rows + 0.4)
+    size = 4.6 if len(its) > 1 else 6.0
+    fig = _new_figure(size * cols + 1.0, size * 0.95 * rows + 0.5)
     axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
     for ax, i in zip(axes, its):
         st = _state_at(states, i)
-        plot_swarm(ax, surface, st.positions, best=st.best_position, truth=truth, iteration=i)
+        sc = plot_swarm(ax, surface, st.positions, best=st.best_position, truth=truth, iteration=i)
         ax.set_title(f"iteration {i}: best MSE {st.best_cost:.4f}", fontsize=9)
         if ax is not axes[0]:
             ax.get_legend().remove()
     for ax in axes[len(its):]:
         ax.set_visible(False)
+    cb = fig.colorbar(sc, ax=list(axes[: len(its)]), shrink=0.8, aspect=30)
+    cb.set_label("particle's dphi off the slice's (deg)")
     fig.suptitle(title if title is not None else
                  f"The swarm over the MSE surface at dphi = {np.degrees(surface.dphi):.1f} deg")
     return fig
@@ -1025,7 +1034,7 @@ def plot_pso_run(surface: CostSurface, states, alignment, reference, moving, *, 
     a1, a2, a3 = fig.subplots(1, 3)
     last = states[-1]
     t_xy = None if truth is None else truth.to_paper()[:2]
-    plot_swarm(a1, surface, last.positions, best=last.best_position, truth=t_xy)
+    plot_swarm(a1, surface, last.positions, best=last.best_position, truth=t_xy, colorbar=True)
     a1.set_title(f"swarm after {last.iteration} iterations ({len(last.positions)} particles)",
                  fontsize=10)
     plot_convergence(a2, {"best MSE of this run": alignment.pso})

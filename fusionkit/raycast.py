@@ -1,6 +1,7 @@
 """Casting LIDAR beams through an occupancy grid (exact grid traversal, numba).
 
-Used to make virtual scans for maps that come without recorded scans.
+Used by the simulator (beams through the world) and to make virtual scans for maps that come
+without recorded scans (beams through a robot's map).
 """
 
 from __future__ import annotations
@@ -15,10 +16,10 @@ __all__ = ["cast_rays"]
 
 
 @pjit
-def _cast_kernel(blocked, stop_value, poses_c, angles, max_cells, out):
-    """``blocked[r, c]``: 0 open, 1 hit (a wall: returns a range), 2 opaque without return
-    (unknown space: the beam ends, no range). ``poses_c`` (N, 3): col, row (cell units,
-    continuous), heading (rad). ``out`` (N, B) receives ranges in cells, ``inf`` for no return."""
+def _cast_kernel(blocked, poses_c, angles, max_cells, out):
+    """``blocked[r, c]``: 0 open, 1 a cell that returns the beam. ``poses_c`` (N, 3): col, row
+    (cell units, continuous), heading (rad). ``out`` (N, B) receives ranges in cells, ``inf``
+    for no return."""
     rows, cols = blocked.shape
     n = poses_c.shape[0]
     b = angles.shape[0]
@@ -42,11 +43,8 @@ def _cast_kernel(blocked, stop_value, poses_c, angles, max_cells, out):
             while t <= max_cells:
                 if cx < 0 or cy < 0 or cx >= cols or cy >= rows:
                     break
-                v = blocked[cy, cx]
-                if v == 1:
+                if blocked[cy, cx] != 0:
                     res = t
-                    break
-                if v == stop_value:
                     break
                 if nx < ny:
                     t = nx
@@ -66,8 +64,7 @@ def cast_rays(blocked: np.ndarray, poses_cells: np.ndarray, angles: np.ndarray,
     Parameters
     ----------
     blocked : (rows, cols) uint8
-        0 open, 1 a wall that returns the beam, 2 space the beam cannot see through and that
-        returns nothing (unknown cells of a map).
+        0 open, 1 a cell that returns the beam.
     poses_cells : (N, 3) float
         ``(col, row, heading)``: position in continuous cell coordinates (cell (r, c) spans
         ``[c, c+1) x [r, r+1)``), heading in radians from the +col axis towards +row.
@@ -83,7 +80,7 @@ def cast_rays(blocked: np.ndarray, poses_cells: np.ndarray, angles: np.ndarray,
         nothing returned.
     """
     out = np.empty((len(poses_cells), len(angles)), np.float64)
-    _cast_kernel(np.ascontiguousarray(blocked, np.uint8), np.uint8(2),
+    _cast_kernel(np.ascontiguousarray(blocked, np.uint8),
                  np.ascontiguousarray(poses_cells, np.float64),
                  np.ascontiguousarray(angles, np.float64), float(max_range_cells), out)
     return out.astype(np.float32)

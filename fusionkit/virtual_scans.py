@@ -3,8 +3,15 @@
 A map saved by any SLAM package carries no scans, but the method compares scans. fusionkit
 samples poses in the map's free space, away from walls, orders them into a path (a greedy
 nearest-neighbour tour, so that Algorithm 1's sections hold neighbouring poses, as along a real
-trajectory), and casts beams from each through the map: occupied cells return the beam, unknown
-cells swallow it (no return), as a sensor at that spot would have seen the mapped world.
+trajectory), and casts beams from each through the map.
+
+Occupied *and unknown* cells return the beam. A robot's map has gaps in its walls (grazing
+beams, glass, doors seen ajar) and unexplored space behind them; a real beam through such a gap
+would have met the wall behind it, a cell or two further on, and returning the beam at the first
+unknown cell reproduces that. Letting unknown cells swallow the beam instead makes two maps of
+the same place give very different scans: on two simulated office robots, the 300 most
+correlated virtual-scan pairs held 11 true correspondences (within 1 m and 5 degrees) that way,
+against 146 with unknown returning the beam.
 """
 
 from __future__ import annotations
@@ -102,7 +109,7 @@ def virtual_scans(grid: OccupancyGrid, *, n_poses: int = 1500, beams: int = 360,
     if n_poses < 1 or beams < 2 or range_max <= 0:
         raise InputError("virtual scans need n_poses >= 1, beams >= 2 and range_max > 0")
     poses = sample_free_poses(grid, n_poses, clearance=clearance, seed=seed)
-    blocked = np.where(grid.occupied_mask(), 1, np.where(grid.known_mask(), 0, 2)).astype(np.uint8)
+    blocked = (~grid.free_mask()).astype(np.uint8)      # occupied and unknown return the beam
     local = grid.origin_transform.inverse.apply_pose(poses)
     pc = np.column_stack([local[:, 0] / grid.resolution, local[:, 1] / grid.resolution, local[:, 2]])
     inc = 2 * math.pi / beams

@@ -172,9 +172,9 @@ def test_maps_without_scans_merge_by_virtual_scans(sim):
     res = merge(grids, config=MergeConfig(seed=3))
     assert res.virtual == (True, True)
     p = res.placements[1]
-    if p.merged:   # a confident placement must be right; a refusal is allowed
-        dt, dr = p.transform.error_to(_true_relative(sim, 1))
-        assert dt < 3 * sim.world.resolution and math.degrees(dr) < 2.0
+    assert p.merged
+    dt, dr = p.transform.error_to(_true_relative(sim, 1))
+    assert dt < 3 * sim.world.resolution and math.degrees(dr) < 2.0
 
 
 def test_a_map_of_another_resolution_is_resampled_to_the_reference(sim):
@@ -188,3 +188,24 @@ def test_a_map_of_another_resolution_is_resampled_to_the_reference(sim):
     assert p.merged
     dt, dr = p.transform.error_to(_true_relative(sim, 1))
     assert dt < 3 * sim.world.resolution and math.degrees(dr) < 2.0
+
+
+def test_virtual_scans_see_the_map_walls_and_unknown_as_returns():
+    from fusionkit.grid import OccupancyGrid
+    from fusionkit.virtual_scans import virtual_scans
+    d = np.full((40, 60), -1, np.int8)
+    d[5:35, 5:55] = 0
+    d[5, 5:55] = d[34, 5:55] = d[5:35, 5] = 100          # three walls; the east side is unexplored
+    g = OccupancyGrid(d, 0.1, (2.0, -1.0, 0.5))
+    log = virtual_scans(g, n_poses=50, range_max=20.0, seed=1)
+    assert log.n_scans == 50 and log.n_beams == 360
+    # every beam ends on a wall or at the edge of the known area: nothing escapes the map
+    assert np.isfinite(log.ranges).all()
+    # a range ends on the face of the cell that returned it: step a quarter cell into it
+    ends = ScanLog(log.poses, log.ranges + 0.025, log.angle_min, log.angle_increment,
+                   30.0).endpoints()
+    r, c = g.world_to_cell(ends)
+    r, c = np.floor(r).astype(int), np.floor(c).astype(int)
+    inside = (r >= 0) & (r < 40) & (c >= 0) & (c < 60)
+    assert inside.mean() > 0.99
+    assert (d[r[inside], c[inside]] != 0).mean() > 0.95

@@ -16,7 +16,7 @@ from ..errors import FusionkitError
 __all__ = ["main", "build_parser"]
 
 #: Subcommand modules, in the order ``fusionkit --help`` lists them.
-COMMAND_MODULES = ("run", "simulate", "merge", "evaluate", "importer", "export", "tui")
+COMMAND_MODULES = ("run", "simulate", "merge", "evaluate", "importer", "export", "tui", "bench")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -150,9 +150,12 @@ def cluster_hypotheses(h: Hypotheses, *, radius: float = 0.75, angle: float = ma
     scale = radius / (2 * math.sin(angle / 2))
     emb = _embed(p, scale)
     tree = cKDTree(emb)
-    nbrs = tree.query_ball_point(emb, radius)
     w = h.weight
-    support = np.array([w[n].sum() for n in nbrs])
+    pairs = tree.query_pairs(radius, output_type="ndarray")
+    support = w.copy()
+    if len(pairs):
+        support += np.bincount(pairs[:, 0], weights=w[pairs[:, 1]], minlength=len(w))
+        support += np.bincount(pairs[:, 1], weights=w[pairs[:, 0]], minlength=len(w))
     alive = np.ones(len(w), bool)
     out = []
     order = np.argsort(-support, kind="stable")
@@ -161,7 +164,7 @@ def cluster_hypotheses(h: Hypotheses, *, radius: float = 0.75, angle: float = ma
             break
         if not alive[i]:
             continue
-        members = np.array([m for m in nbrs[i]], np.int64)
+        members = np.asarray(tree.query_ball_point(emb[i], radius), np.int64)
         mw = w[members]
         if mw.sum() <= 0:
             continue
@@ -171,6 +174,5 @@ def cluster_hypotheses(h: Hypotheses, *, radius: float = 0.75, angle: float = ma
             cc, ss = math.cos(th), math.sin(th)
             xy = xy - np.array([cc * centre[0] - ss * centre[1], ss * centre[0] + cc * centre[1]])
         out.append(Cluster(Transform2D(float(xy[0]), float(xy[1]), th), float(support[i]), len(members)))
-        gone = tree.query_ball_point(emb[i], 2 * radius)
-        alive[gone] = False
+        alive[tree.query_ball_point(emb[i], 2 * radius)] = False
     return out

@@ -10,8 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
-from scipy import ndimage
 
 from ..grid import OccupancyGrid
 from ..scanlog import ScanLog
@@ -33,8 +33,8 @@ class MapIndex:
     near : (rows, cols) bool
         Cells within one cell (8-neighbourhood) of an occupied cell.
     clear : (rows, cols) bool
-        Free cells at least ``clear_cells`` cells from every occupied cell: a wall of another
-        map drawn there contradicts this map.
+        Free cells at least ``clear_cells`` cells (Euclidean, about) from every occupied cell: a
+        wall of another map drawn there contradicts this map.
     dist : (rows, cols) float32
         Distance (cells) of each cell to the nearest occupied cell.
     nearest : (2, rows, cols) int32
@@ -84,6 +84,22 @@ class MapIndex:
         return ri, ci, inside
 
 
+def _nearest_walls(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per cell, the distance (cells) to a nearest occupied cell and that cell's ``(row, col)``.
+
+    OpenCV's labelled distance transform (its labels number the wall pixels in raster order);
+    its distances are within half a cell of the exact Euclidean ones.
+    """
+    rows, cols = occupied.shape
+    if not occupied.any():
+        return (np.full(occupied.shape, np.inf, np.float32), np.zeros((2, rows, cols), np.int32))
+    dist, labels = cv2.distanceTransformWithLabels((~occupied).astype(np.uint8), cv2.DIST_L2,
+                                                   cv2.DIST_MASK_PRECISE, labelType=cv2.DIST_LABEL_PIXEL)
+    wr, wc = np.nonzero(occupied)
+    lab = labels - 1
+    return dist, np.stack([wr.astype(np.int32)[lab], wc.astype(np.int32)[lab]])
+
+
 def spread_indices(poses: np.ndarray, spacing: float, limit: int) -> np.ndarray:
     """Indices of at most ``limit`` poses, one per ``spacing`` x ``spacing`` m cell of the
     plane (the first pose in each), then thinned evenly if still too many; ascending."""
@@ -121,15 +137,12 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     occupied = tri.occupied_mask()
     known = tri.known_mask()
     free = known & ~occupied
-    if occupied.any():
-        dist, nearest = ndimage.distance_transform_edt(~occupied, return_indices=True)
-        dist = dist.astype(np.float32)
-        nearest = nearest.astype(np.int32)
-    else:
-        dist = np.full(occupied.shape, np.inf, np.float32)
-        nearest = np.zeros((2,) + occupied.shape, np.int32)
-    near = dist <= 1.5
-    clear = free & (dist >= clear_cells)
+    dist, nearest = _nearest_walls(occupied)
+    occ8 = occupied.astype(np.uint8)
+    near = cv2.dilate(occ8, np.ones((3, 3), np.uint8)).astype(bool)
+    reach = 2 * clear_cells - 1
+    walls_close = cv2.dilate(occ8, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach))).astype(bool)
+    clear = free & ~walls_close
     r, c = np.nonzero(occupied)
     points = tri.cell_to_world(r, c)
     if len(points) > max_refine_points:

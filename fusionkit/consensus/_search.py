@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 from scipy import fft as sfft
 from scipy import ndimage
@@ -38,9 +39,14 @@ def orientation_histogram(index: MapIndex, bins: int = 180, sigma: float = 3.0) 
     slant is a staircase, and the gradient of a sharper raster follows the stairs (biased
     towards the grid's axes by a few degrees) rather than the wall.
     """
-    occ = ndimage.gaussian_filter(index.occupied.astype(np.float32), sigma)
-    gy = ndimage.sobel(occ, axis=0)
-    gx = ndimage.sobel(occ, axis=1)
+    r, c = np.nonzero(index.occupied)
+    if r.size == 0:
+        return np.full(bins, 1.0 / bins)
+    pad = int(3 * sigma) + 2
+    window = index.occupied[max(r.min() - pad, 0):r.max() + pad + 1, max(c.min() - pad, 0):c.max() + pad + 1]
+    occ = cv2.GaussianBlur(window.astype(np.float32), (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
+    gy = cv2.Sobel(occ, cv2.CV_32F, 0, 1, ksize=3)
+    gx = cv2.Sobel(occ, cv2.CV_32F, 1, 0, ksize=3)
     mag = np.hypot(gx, gy)
     sel = mag > 0.05 * max(float(mag.max()), 1e-12)
     ang = np.mod(np.arctan2(gy[sel], gx[sel]) + index.grid.origin[2], math.pi)
@@ -119,11 +125,11 @@ def evidence_raster(index: MapIndex, *, coarse: float = 0.1, max_side: int = 256
 
 
 def _turned_cells(ev: EvidenceRaster, points_b: np.ndarray, theta: float) -> np.ndarray:
-    """Distinct coarse A-cell coordinates ``(col, row)`` of B's points turned by ``theta``
-    (before any translation)."""
+    """Coarse A-cell coordinates ``(col, row)`` of B's points turned by ``theta`` (before any
+    translation); a cell may repeat."""
     rot = Transform2D(0.0, 0.0, theta)
     q0 = ev.index.grid.origin_transform.inverse(rot(points_b)) / ev.cell
-    return np.unique(np.floor(q0).astype(np.int64), axis=0)
+    return np.floor(q0).astype(np.int64)
 
 
 class Correlator:
@@ -173,31 +179,28 @@ class Correlator:
         corr, lo = self.correlate(theta)
         ha, wa = ev.values.shape
         rad = max(1, int(round(suppress / ev.cell)))
-        peaks = ndimage.maximum_filter(corr, size=2 * rad + 1, mode="wrap")
-        cand = np.nonzero((corr == peaks) & (corr > 0))
-        if cand[0].size == 0:
-            return []
-        vals = corr[cand]
-        order = np.argsort(-vals, kind="stable")[: count * 4]
-        out, taken = [], []
+        out = []
         psi = ev.index.grid.origin[2]
-        for k in order:
-            dr, dc = int(cand[0][k]), int(cand[1][k])
-            if dr >= ha:
-                dr -= self.shape[0]
-            if dc >= wa:
-                dc -= self.shape[1]
-            if any(abs(dr - r) <= rad and abs(dc - c) <= rad for r, c in taken):
-                continue
-            taken.append((dr, dc))
+        work = corr.copy()
+        rows, cols = work.shape
+        for _ in range(count):
+            k = int(np.argmax(work))
+            r0, c0 = divmod(k, cols)
+            v = float(work[r0, c0])
+            if v <= 0:
+                break
+            # suppress the peak's neighbourhood (indices wrap around the padded shape)
+            rr = np.arange(r0 - rad, r0 + rad + 1) % rows
+            cc = np.arange(c0 - rad, c0 + rad + 1) % cols
+            work[np.ix_(rr, cc)] = -np.inf
+            dr = r0 - rows if r0 >= ha else r0
+            dc = c0 - cols if c0 >= wa else c0
             # B's raster cell (r, c) holds coarse A-cell coordinates (c + lo_x, r + lo_y) and
             # lands on A's cell (r + dr, c + dc): the shift in A's cell frame is
             # (dc - lo_x, dr - lo_y) coarse cells
             d = np.array([dc - lo[0], dr - lo[1]], float) * ev.cell
             t = (math.cos(psi) * d[0] - math.sin(psi) * d[1], math.sin(psi) * d[0] + math.cos(psi) * d[1])
-            out.append((Transform2D(float(t[0]), float(t[1]), theta), float(vals[k])))
-            if len(out) >= count:
-                break
+            out.append((Transform2D(float(t[0]), float(t[1]), theta), v))
         return out
 
 

@@ -1,0 +1,114 @@
+"""``fusionkit bench``: every method on the same seeded cases, scored against the truth."""
+
+from __future__ import annotations
+
+import shlex
+import sys
+from pathlib import Path
+
+from ..errors import InputError
+from ._common import Progress, float_range, int_range
+
+
+def register(sub) -> None:
+    from ..bench import DEFAULT_METHODS, MODES, BenchConfig
+    from ..pipeline import METHODS
+    from ..worlds import WORLDS
+    d = BenchConfig()
+    p = sub.add_parser(
+        "bench", help="compare merging methods on seeded cases made from ground-truth maps",
+        description="Make seeded cases from a folder of ground-truth maps (ROS map_server YAML) "
+                    "and run every method on the same cases: 'explore' cases are simulated robots "
+                    "exploring a map (own-frame maps with scans), 'crop' cases are overlapping "
+                    "windows of a map, each turned and shifted at random (no scans). A pair (a "
+                    "non-reference map of a case) is a success when merged with a rotation error "
+                    "below --max-rotation and its centroid within --max-cells of the truth, a wrong "
+                    "merge when merged outside those bounds, a refusal when not merged. Prints the "
+                    "table and writes OUT/bench.md, OUT/bench.json and OUT/bench_METHOD.png (one "
+                    "case per method). Results do not depend on --jobs.")
+    p.add_argument("folders", nargs="*", metavar="DIR",
+                   help="folders of ground-truth maps (*.yaml); default: maps and maps/real, plus "
+                        "the built-in worlds not already found there")
+    p.add_argument("--worlds", nargs="*", choices=list(WORLDS), default=None, metavar="NAME",
+                   help=f"built-in worlds to add ({', '.join(WORLDS)}); default: all of them when no "
+                        f"folder is given, none otherwise")
+    p.add_argument("--methods", nargs="+", choices=METHODS, default=list(DEFAULT_METHODS), metavar="M",
+                   help=f"methods to compare (default: {' '.join(DEFAULT_METHODS)}; also "
+                        f"{' '.join(m for m in METHODS if m not in DEFAULT_METHODS)})")
+    p.add_argument("--modes", nargs="+", choices=MODES, default=list(d.modes),
+                   help=f"kinds of case (default: {' '.join(d.modes)})")
+    p.add_argument("--cases", type=int_range(1, 100000), default=d.cases,
+                   help=f"number of cases (default {d.cases}); worlds, modes and K are cycled")
+    p.add_argument("--robots", nargs="+", type=int_range(2, 5), default=list(d.robots), metavar="K",
+                   help=f"maps per case, cycled (default: {' '.join(map(str, d.robots))})")
+    p.add_argument("--min-overlap", type=float_range(0, 1, lo_open=True), default=d.min_overlap,
+                   help=f"least overlap (fraction of the smaller map's known cells) linking each map "
+                        f"to another (default {d.min_overlap})")
+    p.add_argument("--max-overlap", type=float_range(0, 1, lo_open=True), default=d.max_overlap,
+                   help=f"largest overlap of a crop with the window it is drawn beside "
+                        f"(default {d.max_overlap})")
+    p.add_argument("--poses", type=int_range(100, 1_000_000), default=d.poses,
+                   help=f"poses per simulated robot (explore; default {d.poses})")
+    p.add_argument("--range-noise", type=float_range(0, 1), default=d.range_noise,
+                   help=f"LIDAR range noise, standard deviation in m (explore; default {d.range_noise})")
+    p.add_argument("--drift", type=float_range(0, 1), default=d.drift,
+                   help=f"odometry translation drift in m per square-root metre travelled "
+                        f"(explore; default {d.drift})")
+    p.add_argument("--drift-theta", type=float_range(0, 1), default=d.drift_theta,
+                   help=f"odometry heading drift in rad per square-root metre travelled "
+                        f"(explore; default {d.drift_theta})")
+    p.add_argument("--cell-noise", type=float_range(0, 0.5), default=d.cell_noise,
+                   help=f"fraction of each crop's wall cells moved to a neighbouring cell "
+                        f"(crop; default {d.cell_noise})")
+    p.add_argument("--crop-fraction", type=float_range(0.1, 1), default=d.crop_fraction,
+                   help=f"side of a crop as a fraction of the shorter side of the map's known area "
+                        f"(crop; default {d.crop_fraction})")
+    p.add_argument("--max-rotation", type=float_range(0, 180, lo_open=True), default=d.max_rotation_deg,
+                   help=f"success bound on the rotation error, degrees (default {d.max_rotation_deg})")
+    p.add_argument("--max-cells", type=float_range(0, 1e6, lo_open=True), default=d.max_cells,
+                   help=f"success bound on the centroid displacement, cells (default {d.max_cells})")
+    p.add_argument("--seed", type=int, default=d.seed, help=f"seed of the suite (default {d.seed})")
+    p.add_argument("--jobs", type=int_range(1, 64), default=1,
+                   help="cases run in this many processes at once (default 1)")
+    p.add_argument("--out", default="bench", metavar="DIR",
+                   help="output folder, created if missing (default: bench)")
+    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..bench import BenchConfig, find_worlds, format_table, run_bench, summarize, write_outputs
+
+    folders = list(args.folders)
+    builtin = args.worlds
+    if not folders:
+        folders = [f for f in ("maps", "maps/real") if Path(f).is_dir()]
+        if builtin is None:
+            from ..worlds import WORLDS
+            builtin = list(WORLDS)
+    builtin = builtin or []
+    config = BenchConfig(methods=tuple(args.methods), modes=tuple(args.modes), robots=tuple(args.robots),
+                         cases=args.cases, min_overlap=args.min_overlap, max_overlap=args.max_overlap,
+                         poses=args.poses, range_noise=args.range_noise, drift=args.drift,
+                         drift_theta=args.drift_theta, cell_noise=args.cell_noise,
+                         crop_fraction=args.crop_fraction, max_rotation_deg=args.max_rotation,
+                         max_cells=args.max_cells, seed=args.seed)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"{out}: exists and is not a folder; choose another --out")
+    worlds, skipped = find_worlds(folders, builtin)
+    progress = Progress("bench", enabled=False if args.quiet else None)
+    command = "fusionkit bench " + " ".join(shlex.quote(a) for a in sys.argv[2:]) \
+        if len(sys.argv) > 1 and sys.argv[1] == "bench" else ""
+    result = run_bench(worlds, config, jobs=args.jobs, skipped=skipped, command=command,
+                       progress=lambda done, total, label: progress(done, total, label))
+    progress.close()
+    summary = summarize(result)
+    paths = write_outputs(result, out, summary)
+    if not args.quiet:
+        if skipped:
+            print("not used: " + "; ".join(f"{n} ({w})" for n, w in skipped))
+        print(f"{len(result.cases)} cases on {len(worlds)} worlds in {result.seconds:.0f} s")
+        print(format_table(result, summary))
+        print("wrote " + ", ".join(str(p) for p in paths))
+    return 0

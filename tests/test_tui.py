@@ -1,0 +1,370 @@
+"""The terminal UI (``fusionkit tui``), driven by Textual's Pilot on a small simulated run.
+
+One run (3 robots x 600 poses, seeded) is simulated for the whole module; every test starts
+the app in the run's parent directory with the run given as ``run``, so that no absolute
+temporary path reaches the screen (snapshots stay the same from machine to machine).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+import pytest
+from textual.widgets import DataTable, Input
+
+from fusionkit.cli import main
+from fusionkit.errors import InputError
+from fusionkit.grid import OccupancyGrid
+from fusionkit.mapio import load_map
+from fusionkit.pipeline import MergeConfig
+from fusionkit_tui import make_app
+from fusionkit_tui.screens.export import ConfirmScreen, ExportScreen
+from fusionkit_tui.screens.help import HelpScreen
+from fusionkit_tui.widgets.map_picker import MapTree
+from fusionkit_tui.widgets.map_preview import (FREE_RANK, OCCUPIED_RANK, STATE_COLOURS, UNKNOWN_RANK,
+                                               downsample, preview_strips)
+
+ROBOTS = 3
+POSES = 600
+SIM_SEED = 2  # robot_2 is not merged with these settings: both outcomes are on screen
+FAST = {"iterations": "30"}  # fewer PSO iterations keep the merges short
+
+
+@pytest.fixture(scope="module")
+def run_root(tmp_path_factory):
+    """A directory holding ``run/``: a simulated run (robot maps, scans, world, truth.json)."""
+    from fusionkit.simulate import SimulationConfig, simulate, write_run
+    from fusionkit.worlds import default_world
+
+    root = tmp_path_factory.mktemp("tui")
+    write_run(simulate(default_world(), SimulationConfig(robots=ROBOTS, poses=POSES, seed=SIM_SEED)),
+              root / "run")
+    return root
+
+
+@pytest.fixture()
+def in_root(run_root, monkeypatch):
+    monkeypatch.chdir(run_root)
+    return run_root
+
+
+async def until(pilot, condition, timeout: float = 60.0) -> None:
+    """Let the app run until ``condition()`` holds (fails after ``timeout`` seconds)."""
+    t0 = time.monotonic()
+    while not condition():
+        assert time.monotonic() - t0 < timeout, "the app did not get there"
+        await pilot.pause(0.05)
+
+
+async def ready(pilot) -> None:
+    """The directory tree and the first preview are loaded."""
+    screen = pilot.app.main
+    tree = screen.query_one(MapTree)
+    await until(pilot, lambda: len(tree.root.children) > 0)
+    if screen.maps.selected:
+        await until(pilot, lambda: screen.maps.query_one("#preview").grid is not None)
+    await pilot.pause()
+
+
+async def type_setting(pilot, key: str, text: str) -> None:
+    inp = pilot.app.main.query_one(f"#set-{key}", Input)
+    inp.focus()
+    inp.value = ""
+    await pilot.press(*text)
+    await pilot.pause()
+
+
+async def run_merge(pilot, settings=FAST) -> None:
+    """Press r with ``settings`` typed in, and wait for the merge worker to finish."""
+    app = pilot.app
+    screen = app.main
+    for k, v in settings.items():
+        await type_setting(pilot, k, v)
+    await pilot.press("ctrl+r")
+    await pilot.pause()
+    assert screen.merging or screen.result is not None, [n.message for n in app._notifications]
+    await app.workers.wait_for_complete([w for w in app.workers if w.group == "merge"])
+    await until(pilot, lambda: not screen.merging)
+    await pilot.pause()
+
+
+# -- the map picture ------------------------------------------------------------------------------
+def _grid(data) -> OccupancyGrid:
+    return OccupancyGrid(np.asarray(data, np.int8), 0.1, (0.0, 0.0, 0.0), "t")
+
+
+def test_preview_at_one_cell_per_pixel_is_the_map_upside_down():
+    rng = np.random.default_rng(0)
+    data = rng.choice(np.array([-1, 0, 100], np.int8), size=(12, 9))
+    rank, _ = downsample(_grid(data), 9, 12)
+    expected = np.where(data == 100, OCCUPIED_RANK, np.where(data == 0, FREE_RANK, UNKNOWN_RANK))
+    assert np.array_equal(rank, expected[::-1])  # row 0 of the picture is the highest y
+
+
+def test_preview_keeps_a_thin_wall_when_shrinking():
+    data = np.zeros((40, 40), np.int8)
+    data[:, 20] = 100  # a one-cell wall
+    rank, _ = downsample(_grid(data), 10, 10)
+    assert rank.shape == (10, 10)
+    assert (rank == OCCUPIED_RANK).sum(axis=1).min() >= 1  # the wall is in every row
+    assert (rank == FREE_RANK).sum() > 60
+
+
+def test_preview_draws_the_three_states_distinctly_with_and_without_colour():
+    data = np.array([[100, 0, -1]] * 2, np.int8)  # one column per state, two pixel rows
+    colour = preview_strips(_grid(data), 3, 1)[0]
+    styles = [seg.style for seg in colour if seg.text.strip()]
+    fgs = {seg.style.color.name for seg in colour}
+    assert all(s is not None for s in styles)
+    assert {STATE_COLOURS[OCCUPIED_RANK], STATE_COLOURS[FREE_RANK], STATE_COLOURS[UNKNOWN_RANK]} <= fgs
+    mono = preview_strips(_grid(data), 3, 1, no_color=True)[0]
+    assert mono.text == "█░ "
+    assert all(seg.style is None or seg.style.color is None for seg in mono)
+
+
+def test_fused_preview_colours_cells_by_the_map_that_gave_them():
+    data = np.array([[100, 100], [0, 0]], np.int8)
+    owner = np.array([[0, 1], [0, 1]], np.int16)
+    a = preview_strips(_grid(data), 2, 1, owner=owner)[0]
+    b = preview_strips(_grid(data), 2, 1)[0]
+    colours_a = [seg.style.color.name for seg in a for _ in seg.text]
+    assert colours_a[0] != colours_a[1]  # two robots, two colours
+    assert [seg.style.color.name for seg in b for _ in seg.text] == [STATE_COLOURS[FREE_RANK]] * 2
+
+
+# -- command line ---------------------------------------------------------------------------------
+def test_cli_explains_the_subcommand_and_refuses_a_missing_path(capsys, tmp_path):
+    with pytest.raises(SystemExit) as exc:
+        main(["tui", "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "DIR or MAP.yaml" in out and "NO_COLOR" in out
+    assert main(["tui", str(tmp_path / "nowhere")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no such file or directory" in err[0]
+
+
+def test_a_run_directory_selects_its_robot_maps_not_the_world(in_root):
+    app = make_app(["run"])
+    assert [p.name for p in app._selected] == [f"robot_{k}.yaml" for k in range(1, ROBOTS + 1)]
+    with pytest.raises(InputError):
+        make_app(["run", "run/robot_1.yaml"])
+
+
+# -- the whole flow -------------------------------------------------------------------------------
+async def test_select_run_inspect_export_and_the_export_loads_back(in_root, tmp_path):
+    app = make_app(["run"])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        assert len(screen.maps.selected) == ROBOTS
+
+        # unselect robot_3 in the tree and select it again, with the keyboard
+        tree = screen.query_one(MapTree)
+        tree.focus()
+        await until(pilot, lambda: any(n.data.path.name == "robot_3.yaml" for n in tree.root.children))
+        line = next(n.line for n in tree.root.children if n.data.path.name == "robot_3.yaml")
+        tree.cursor_line = line
+        await pilot.press("space")
+        assert [p.name for p in screen.maps.selected] == ["robot_1.yaml", "robot_2.yaml"]
+        await pilot.press("space")
+        assert [p.name for p in screen.maps.selected][-1] == "robot_3.yaml"
+
+        # settings typed in become the merge's settings
+        await run_merge(pilot, {"iterations": "30", "particles": "30", "seed": "4"})
+        result = screen.result
+        assert result is not None
+        assert result.config == MergeConfig(seed=4).with_pso(iterations=30, particles=30)
+        assert app.main.query_one("TabbedContent").active == "result"
+
+        # the live plot got every PSO iteration of every alignment
+        plot = screen.run_panel.plot
+        assert plot.series and all(len(xs) == len(ys) > 0 for _, xs, ys in plot.series)
+        steps_run = [s for s in result.steps if s.alignment is not None]
+        assert {lbl for lbl, _, _ in plot.series if not lbl.endswith("refine")} <= \
+            {f"{result.placements[s.new].name} -> {result.placements[s.placed].name}" for s in steps_run}
+
+        # inspect: one row per map with its transform, and the Table 1 metrics (truth.json)
+        table = screen.query_one("#placements", DataTable)
+        assert table.row_count == ROBOTS
+        for p in result.placements:
+            row = [str(c) for c in table.get_row_at(p.index)]
+            assert row[1] == ("yes" if p.merged else "no")
+            if p.merged:
+                assert row[3] == f"{p.transform.x:.2f}"
+        assert screen.evaluation is not None
+        metrics = screen.query_one("#metrics", DataTable)
+        assert metrics.display and metrics.row_count == len(result.order)
+        assert 0 < screen.evaluation.metrics.completeness <= 100
+
+        # export to a path the operator types
+        out = tmp_path / "exported" / "merged.yaml"
+        out.parent.mkdir()
+        await pilot.press("e")
+        await pilot.pause()
+        assert isinstance(app.screen, ExportScreen)
+        inp = app.screen.query_one(Input)
+        inp.value = ""
+        await pilot.press(*str(out), "enter")
+        await pilot.pause()
+        assert not isinstance(app.screen, ExportScreen)
+        grid = load_map(out)
+        assert np.array_equal(grid.data, result.grid.trinary())
+        report = json.loads(out.with_name("merged.report.json").read_text())
+        assert [m["input"] for m in report["maps"]] == [str(p) for p in screen.maps.selected]
+        assert report["output"] == str(out)
+
+        # exporting again asks first; "n" keeps the files, "y" replaces them
+        stamp = out.stat().st_mtime_ns
+        await pilot.press("e")
+        await pilot.pause()
+        await pilot.press("enter")
+        await pilot.pause()
+        assert isinstance(app.screen, ConfirmScreen)
+        await pilot.press("n")
+        await pilot.pause()
+        assert out.stat().st_mtime_ns == stamp
+        os.utime(out, ns=(stamp - 10**9, stamp - 10**9))
+        await pilot.press("e")
+        await pilot.pause()
+        await pilot.press("enter")
+        await pilot.pause()
+        await pilot.press("y")
+        await pilot.pause()
+        assert out.stat().st_mtime_ns != stamp - 10**9
+        assert screen.exported is not None and screen.exported.yaml == out
+
+        # an input map is never overwritten: the export is refused with a notification
+        await pilot.press("e")
+        await pilot.pause()
+        inp = app.screen.query_one(Input)
+        inp.value = "run/robot_1.yaml"
+        before = (in_root / "run" / "robot_1.pgm").read_bytes()
+        await pilot.press("enter")
+        await pilot.pause()
+        if isinstance(app.screen, ConfirmScreen):
+            await pilot.press("y")
+            await pilot.pause()
+        assert (in_root / "run" / "robot_1.pgm").read_bytes() == before
+        assert any(n.severity == "error" for n in app._notifications)
+
+    # the exported map is what `fusionkit evaluate` reads
+    assert main(["evaluate", str(out), "--truth", str(in_root / "run" / "truth.json"), "--json"]) == 0
+
+
+async def test_cancel_stops_the_merge_and_the_app_stays_usable(in_root):
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        # a swarm that would run for seconds, cancelled as soon as it is aligning
+        await type_setting(pilot, "iterations", "100000")
+        await type_setting(pilot, "particles", "4000")
+        await pilot.press("ctrl+r")
+        await until(pilot, lambda: screen.run_panel.plot.series and screen.run_panel.plot.series[0][1])
+        assert screen.merging
+        await pilot.press("escape")
+        await until(pilot, lambda: not screen.merging)
+        assert screen.result is None
+        assert "cancelled" in str(screen.run_panel.query_one("#detail").render())
+        assert any("cancelled" in n.message for n in app._notifications)
+
+        # still usable: the next run completes
+        await run_merge(pilot, {"particles": "40", **FAST})
+        assert screen.result is not None
+        assert screen.query_one("#placements", DataTable).row_count == ROBOTS
+
+
+async def test_invalid_settings_block_the_run_with_a_message(in_root):
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        await pilot.press("2")
+        await type_setting(pilot, "particles", "many")
+        inp = screen.query_one("#set-particles", Input)
+        assert inp.has_class("-invalid")
+        assert "whole number" in str(screen.query_one("#hint-particles").render())
+        await pilot.press("ctrl+r")
+        await pilot.pause()
+        assert not screen.merging and not [w for w in app.workers if w.group == "merge"]
+        assert any(n.severity == "error" and "particles" in n.message for n in app._notifications)
+        await type_setting(pilot, "particles", "12")
+        assert not inp.has_class("-invalid")
+        assert screen.settings.config().pso.particles == 12
+
+
+async def test_a_broken_map_is_a_notification_not_a_crash(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "maps").mkdir()
+    (tmp_path / "maps" / "broken.yaml").write_text("image: missing.pgm\nresolution: 0.05\n")
+    app = make_app(["maps"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        screen = app.main
+        await until(pilot, lambda: len(screen.query_one(MapTree).root.children) > 0)
+        assert screen.maps.selected == []
+        assert any(n.severity == "error" for n in app._notifications)
+        screen.maps.toggle(tmp_path / "maps" / "broken.yaml")
+        await pilot.pause()
+        assert screen.maps.selected == []
+        await pilot.press("r")
+        await pilot.pause()
+        assert not screen.merging
+        assert any("at least two maps" in n.message for n in app._notifications)
+        await pilot.press("question_mark")
+        await pilot.pause()
+        assert isinstance(app.screen, HelpScreen)
+        await pilot.press("escape")
+        await pilot.pause()
+        assert not isinstance(app.screen, HelpScreen)
+
+
+# -- snapshots ------------------------------------------------------------------------------------
+def _snapshot_ready(tab: str | None = None, merge: bool = False, then: str | None = None):
+    async def before(pilot):
+        await ready(pilot)
+        if merge:
+            await run_merge(pilot)
+        if tab:
+            await pilot.press(tab)
+        if then:
+            await pilot.press(then)
+        await pilot.pause()
+        for inp in pilot.app.screen.query(Input):
+            inp.cursor_blink = False
+        pilot.app.clear_notifications()
+        await pilot.pause()
+    return before
+
+
+@pytest.mark.parametrize("size", [(80, 24), (120, 40)], ids=["80x24", "120x40"])
+def test_snapshot_maps(in_root, snap_compare, size):
+    assert snap_compare(make_app(["run"]), terminal_size=size, run_before=_snapshot_ready())
+
+
+def test_snapshot_settings(in_root, snap_compare):
+    assert snap_compare(make_app(["run"]), terminal_size=(80, 24), run_before=_snapshot_ready("2"))
+
+
+def test_snapshot_run(in_root, snap_compare):
+    assert snap_compare(make_app(["run"]), terminal_size=(80, 24),
+                        run_before=_snapshot_ready("3", merge=True))
+
+
+@pytest.mark.parametrize("size", [(80, 24), (120, 40)], ids=["80x24", "120x40"])
+def test_snapshot_result(in_root, snap_compare, size):
+    assert snap_compare(make_app(["run"]), terminal_size=size,
+                        run_before=_snapshot_ready("4", merge=True))
+
+
+def test_snapshot_export_dialog(in_root, snap_compare):
+    assert snap_compare(make_app(["run"]), terminal_size=(80, 24),
+                        run_before=_snapshot_ready("4", merge=True, then="e"))
+
+
+def test_snapshot_help(in_root, snap_compare):
+    assert snap_compare(make_app(["run"]), terminal_size=(80, 24),
+                        run_before=_snapshot_ready(then="question_mark"))
