@@ -1,0 +1,205 @@
+"""Transforms, grid coordinates, resampling, mapping, scan logs and atomic writes."""
+
+import math
+import os
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from fusionkit.errors import InputError, ScanLogError
+from fusionkit._atomic import atomic_path, check_not_input, write_text_atomic
+from fusionkit.grid import OccupancyGrid
+from fusionkit.mapping import MappingConfig, build_grid
+from fusionkit.resample import canvas_for, resample
+from fusionkit.scanlog import ScanLog, load_scans, save_scans
+from fusionkit.transform import Transform2D, wrap_angle
+
+coord = st.floats(-1e3, 1e3, allow_nan=False)
+angle = st.floats(-20.0, 20.0, allow_nan=False)
+transforms = st.builds(Transform2D, coord, coord, angle)
+points = st.lists(st.tuples(coord, coord), min_size=1, max_size=20).map(np.array)
+
+
+# -- Transform2D -----------------------------------------------------------------------------
+@given(transforms, points)
+def test_inverse_undoes_the_transform(t, p):
+    np.testing.assert_allclose(t.inverse(t(p)), p, atol=1e-6)
+
+
+@given(transforms, transforms, points)
+def test_composition_is_function_composition(a, b, p):
+    np.testing.assert_allclose((a @ b)(p), a(b(p)), atol=1e-6)
+
+
+@given(transforms, transforms, transforms)
+def test_composition_is_associative(a, b, c):
+    assert ((a @ b) @ c).is_close(a @ (b @ c), atol=1e-6)
+
+
+@given(transforms)
+def test_matrix_round_trip_and_theta_range(t):
+    assert Transform2D.from_matrix(t.matrix).is_close(t, atol=1e-9)
+    assert -math.pi <= t.theta < math.pi
+    np.testing.assert_allclose(t.matrix @ t.inverse.matrix, np.eye(3), atol=1e-9)
+
+
+@given(coord, coord, angle, points)
+def test_from_paper_is_eq4_translate_then_rotate(dx, dy, phi, p):
+    t = Transform2D.from_paper(dx, dy, phi)
+    x, y = p[:, 0], p[:, 1]
+    eq4 = np.stack([(x + dx) * math.cos(phi) - (y + dy) * math.sin(phi),
+                    (x + dx) * math.sin(phi) + (y + dy) * math.cos(phi)], axis=1)
+    np.testing.assert_allclose(t(p), eq4, atol=1e-6)
+    np.testing.assert_allclose(Transform2D.from_paper(*t.to_paper()).matrix, t.matrix, atol=1e-9)
+
+
+def test_transform_dict_round_trip_and_bad_values():
+    t = Transform2D(1.5, -2.25, 0.5)
+    assert Transform2D.from_dict(t.as_dict(digits=None)) == t
+    with pytest.raises(ValueError):
+        Transform2D.from_dict({"x": 1, "y": 2})
+    with pytest.raises(ValueError):
+        Transform2D(float("nan"), 0, 0)
+
+
+def test_apply_pose_turns_headings():
+    t = Transform2D(1.0, 0.0, math.pi / 2)
+    out = t.apply_pose([[1.0, 0.0, 0.0]])
+    np.testing.assert_allclose(out, [[1.0, 1.0, math.pi / 2]], atol=1e-12)
+    assert wrap_angle(3 * math.pi) == pytest.approx(-math.pi)
+
+
+# -- OccupancyGrid ---------------------------------------------------------------------------
+@settings(max_examples=50)
+@given(st.floats(0.01, 1.0), coord, coord, angle, st.integers(0, 49), st.integers(0, 79))
+def test_cell_world_round_trip(res, ox, oy, yaw, r, c):
+    g = OccupancyGrid(np.zeros((50, 80), np.int8), res, (ox, oy, yaw))
+    rr, cc = g.world_to_cell(g.cell_to_world(r, c))
+    assert math.floor(rr + 1e-9) == r and math.floor(cc + 1e-9) == c
+    assert rr - r == pytest.approx(0.5, abs=1e-6) and cc - c == pytest.approx(0.5, abs=1e-6)
+
+
+def test_cell_centre_follows_the_contract():
+    g = OccupancyGrid(np.zeros((4, 4)), 0.5, (1.0, 2.0, math.pi / 2))
+    # origin + R(yaw) @ ((c + 0.5) res, (r + 0.5) res) with r=1, c=2: (1.25, 0.75) turned 90 deg
+    np.testing.assert_allclose(g.cell_to_world(1, 2), [1.0 - 0.75, 2.0 + 1.25])
+
+
+def test_grid_refuses_bad_geometry():
+    with pytest.raises(ValueError, match="resolution"):
+        OccupancyGrid(np.zeros((2, 2)), 0.0)
+    with pytest.raises(ValueError, match="2-D"):
+        OccupancyGrid(np.zeros(4), 0.1)
+    g = OccupancyGrid(np.array([[-1, 0], [100, 70]]), 0.1)
+    assert g.counts() == {"occupied": 2, "free": 1, "unknown": 1}
+    assert g.trinary().tolist() == [[-1, 0], [100, 100]]
+    with pytest.raises(ValueError):
+        g.data[0, 0] = 5          # grids are values: their cells cannot be changed in place
+
+
+# -- resample ---------------------------------------------------------------------------------
+def _naive_resample(src: OccupancyGrid, t: Transform2D, target: OccupancyGrid) -> np.ndarray:
+    out = np.full(target.shape, -1, np.int8)
+    for r in range(target.rows):
+        for c in range(target.cols):
+            p = t.inverse(target.cell_to_world(r, c))
+            rr, cc = src.world_to_cell(p)
+            ri, ci = math.floor(rr), math.floor(cc)
+            if 0 <= ri < src.rows and 0 <= ci < src.cols:
+                out[r, c] = src.data[ri, ci]
+    return out
+
+
+def test_resample_matches_a_naive_reference():
+    rng = np.random.default_rng(0)
+    src = OccupancyGrid(rng.choice([-1, 0, 100], (23, 31)).astype(np.int8), 0.1, (0.3, -0.2, 0.4))
+    t = Transform2D(0.7, 1.1, -0.9)
+    target = OccupancyGrid(np.zeros((40, 45), np.int8), 0.07, (-1.0, -0.5, 0.2))
+    np.testing.assert_array_equal(resample(src, t, target).data, _naive_resample(src, t, target))
+
+
+def test_resample_identity_onto_itself_is_exact_and_canvas_covers_the_known_cells():
+    rng = np.random.default_rng(1)
+    g = OccupancyGrid(rng.choice([-1, 0, 100], (30, 20)).astype(np.int8), 0.05, (1.0, 2.0, 0.0))
+    np.testing.assert_array_equal(resample(g, Transform2D.identity(), g).data, g.data)
+    t = Transform2D(3.0, -1.0, 2.0)
+    canvas = canvas_for([g], [t], 0.05)
+    moved = resample(g, t, canvas)
+    assert moved.counts()["occupied"] == pytest.approx(g.counts()["occupied"], rel=0.1)
+
+
+# -- mapping ----------------------------------------------------------------------------------
+def test_build_grid_marks_walls_occupied_and_the_space_before_them_free():
+    # a robot at the origin in a 4 m x 4 m square room seen with 360 beams
+    n = 360
+    ang = -math.pi + 2 * math.pi * np.arange(n) / n
+    r = 2.0 / np.maximum(np.abs(np.cos(ang)), np.abs(np.sin(ang)))
+    log = ScanLog(np.zeros((1, 3)), r[None, :].astype(np.float32), -math.pi, 2 * math.pi / n, 8.0)
+    g = build_grid(log, MappingConfig(resolution=0.1, margin=2))
+    wall = g.occupied_points()
+    assert len(wall) > 100
+    assert np.all(np.abs(np.max(np.abs(wall), axis=1) - 2.0) < 0.15)
+    rr, cc = g.world_to_cell([[0.5, 0.5], [-1.0, 1.2]])
+    assert (g.data[np.floor(rr).astype(int), np.floor(cc).astype(int)] == 0).all()
+
+
+# -- scan logs --------------------------------------------------------------------------------
+def _log(n=5, b=8):
+    rng = np.random.default_rng(2)
+    return ScanLog(rng.normal(size=(n, 3)), rng.uniform(0.1, 5, (n, b)).astype(np.float32),
+                   -math.pi, 2 * math.pi / b, 6.0)
+
+
+def test_scan_log_round_trip(tmp_path):
+    log = _log()
+    save_scans(tmp_path / "r.scans.npz", log)
+    back = load_scans(tmp_path / "r.scans.npz")
+    np.testing.assert_array_equal(back.ranges, log.ranges)
+    np.testing.assert_array_equal(back.poses, log.poses)
+    assert (back.angle_min, back.angle_increment, back.range_max) == (
+        log.angle_min, log.angle_increment, log.range_max)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d.pop("ranges"), "missing key"),
+    (lambda d: d.update(ranges=d["ranges"][:3]), "each scan needs exactly one pose"),
+    (lambda d: d.update(ranges=np.where(d["ranges"] > 2, np.nan, d["ranges"])), "NaN"),
+    (lambda d: d.update(ranges=-d["ranges"]), "negative"),
+    (lambda d: d.update(range_max=np.float64(0.0)), "range_max"),
+])
+def test_bad_scan_logs_name_the_file_and_the_fault(tmp_path, change, message):
+    log = _log()
+    d = dict(poses=log.poses, ranges=log.ranges, angle_min=log.angle_min,
+             angle_increment=log.angle_increment, range_max=log.range_max)
+    change(d)
+    np.savez(tmp_path / "bad.scans.npz", **d)
+    with pytest.raises(ScanLogError, match=message) as err:
+        load_scans(tmp_path / "bad.scans.npz")
+    assert "bad.scans.npz" in str(err.value)
+
+
+def test_truncated_scan_log_is_a_clear_error(tmp_path):
+    save_scans(tmp_path / "a.scans.npz", _log())
+    raw = (tmp_path / "a.scans.npz").read_bytes()
+    (tmp_path / "t.scans.npz").write_bytes(raw[: len(raw) // 2])
+    with pytest.raises(ScanLogError, match="t.scans.npz"):
+        load_scans(tmp_path / "t.scans.npz")
+
+
+# -- atomic writes ----------------------------------------------------------------------------
+def test_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
+    target = tmp_path / "out.txt"
+    write_text_atomic(target, "old")
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("disk full")
+    assert target.read_text() == "old"
+    assert os.listdir(tmp_path) == ["out.txt"]
+
+
+def test_outputs_may_not_be_inputs(tmp_path):
+    (tmp_path / "a.yaml").write_text("x")
+    with pytest.raises(InputError, match="overwrite the input"):
+        check_not_input([tmp_path / "sub" / ".." / "a.yaml"], [tmp_path / "a.yaml"])
