@@ -253,7 +253,7 @@ def align_points(reference: np.ndarray, moving: np.ndarray, resolution: float, *
     reach = fld.radius + r_mov + resolution
     bounds = np.array([[-reach, reach], [-reach, reach], [-math.pi, math.pi]])
     init = None
-    used = tuple(seeds[: config.max_seeds]) if config.seeded else ()
+    used = tuple(seeds[: min(config.max_seeds, config.pso.particles)]) if config.seeded else ()
     if used:
         init = np.array([t.to_paper() for t in used])
         init[:, :2] = np.clip(init[:, :2], -reach, reach)

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
 import os
 import statistics
 import time
@@ -556,7 +557,9 @@ def run_bench(worlds: Sequence[WorldSpec], config: BenchConfig, *, jobs: int = 1
             if progress is not None:
                 progress(done, len(specs), f"{rec['world']} {rec['mode']} K={rec['robots']}")
     else:
-        with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init) as pool:
+        # fresh interpreters: forking a process whose numba kernels started OpenMP threads is unsafe
+        ctx = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init, mp_context=ctx) as pool:
             for rec in pool.map(_run_one, tasks, chunksize=1):
                 records[rec["index"]] = rec
                 done += 1

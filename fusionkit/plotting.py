@@ -1,8 +1,16 @@
-"""Matplotlib figures of grids, trajectories and simulations.
+"""Matplotlib figures of grids, trajectories, simulations and every step of the method.
 
 Every function draws on axes or returns a :class:`matplotlib.figure.Figure`; nothing is shown or
 saved here, so the same calls work in notebooks, scripts and tests (with the Agg backend).
 Grids are drawn in metres with the map-server palette: occupied black, free white, unknown grey.
+Robot ``k`` has the colour ``robot_colour(k)`` in every figure.
+
+The figures of the notebooks, in the order of the method: scans (:func:`plot_scan`,
+:func:`plot_drift`), unique poses (:func:`plot_section_spectra`, :func:`plot_unique_summary`,
+:func:`plot_rotation_invariance`), pairing (:func:`plot_rho_overview`, :func:`plot_pairing`,
+:func:`plot_matches`), alignment (:func:`cost_surface`, :func:`plot_swarm_snapshots`,
+:func:`plot_pso_run`), fusion and metrics (:func:`plot_fused`, :func:`plot_fusion_steps`,
+:func:`plot_table1`) and benchmarks (:func:`plot_bench_case`, :func:`plot_bench_summary`).
 """
 
 from __future__ import annotations
@@ -401,15 +409,21 @@ def plot_drift(run, *, colour: str | None = None):
     return fig
 
 
-def plot_worlds(worlds):
-    """The ground-truth worlds side by side, each with its size (m)."""
+def plot_worlds(worlds, *, cols: int = 4):
+    """Ground-truth maps side by side (at most ``cols`` per row), each titled with its size (m)
+    and cell size."""
     worlds = list(worlds)
-    fig = _new_figure(5.6 * len(worlds), 4.6)
-    axes = np.atleast_1d(fig.subplots(1, len(worlds)))
+    cols = max(1, min(cols, len(worlds)))
+    rows = int(np.ceil(len(worlds) / cols))
+    fig = _new_figure(5.0 * cols + 0.6, 4.3 * rows)
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
     for ax, w in zip(axes, worlds):
         x0, y0, x1, y1 = w.bounds()
         plot_grid(ax, w, title=f"{w.name}: {x1 - x0:.0f} x {y1 - y0:.0f} m, {w.resolution:g} m cells")
-    state_legend(axes[-1])
+        ax.title.set_fontsize(10)
+    for ax in axes[len(worlds):]:
+        ax.set_visible(False)
+    state_legend(axes[len(worlds) - 1])
     return fig
 
 
@@ -836,9 +850,14 @@ def plot_matches(world: OccupancyGrid, poses_a, poses_b, *, tolerance: float = 1
     """
     from matplotlib.lines import Line2D
 
-    pa = np.asarray(poses_a, float).reshape(-1, np.shape(poses_a)[-1] if np.size(poses_a) else 2)[:, :2]
-    pb = np.asarray(poses_b, float).reshape(-1, np.shape(poses_b)[-1] if np.size(poses_b) else 2)[:, :2]
-    d = np.hypot(*(pa - pb).T) if len(pa) else np.zeros(0)
+    def xy(p):
+        a = np.asarray(p, float)
+        return a[:, :2] if a.ndim == 2 and len(a) else np.zeros((0, 2))
+
+    pa, pb = xy(poses_a), xy(poses_b)
+    if len(pa) != len(pb):
+        raise InputError(f"poses_a and poses_b must pair up, got {len(pa)} and {len(pb)} poses")
+    d = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])
     good = d < tolerance
     fig = _new_figure(10.0, 7.0)
     ax = fig.subplots()
@@ -1163,6 +1182,193 @@ def plot_fusion_steps(fused, names=None, *, metrics=None, title: str | None = No
     return fig
 
 
+def plot_case(world: OccupancyGrid, grids, truths, *, names=None, title: str | None = None):
+    """A merging problem with its answer: each map in its own frame (left, small) and the
+    world with each map's known area tinted in its colour (right; for teaching, the merger
+    never sees it).
+
+    Parameters
+    ----------
+    world : OccupancyGrid
+    grids : sequence of OccupancyGrid
+        The maps, each in its own frame.
+    truths : sequence of Transform2D
+        Per map, its frame -> the world frame.
+    names : sequence of str, optional
+    title : str, optional
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    from matplotlib.colors import to_rgb
+
+    grids, truths = list(grids), list(truths)
+    n = len(grids)
+    names = list(names) if names is not None else [g.name or f"map_{k + 1}" for k, g in enumerate(grids)]
+    rows = int(np.ceil(n / 2))
+    fig = _new_figure(14.0, max(5.5, 3.2 * rows))
+    gs = fig.add_gridspec(rows, 4)
+    owner = np.full(world.shape, -1, np.int16)
+    for k, (g, t) in enumerate(zip(grids, truths)):
+        ax = fig.add_subplot(gs[k // 2, k % 2])
+        plot_grid(ax, g, title=f"{names[k]}: own frame")
+        ax.title.set_color(robot_colour(k))
+        ax.title.set_fontsize(9)
+        ax.tick_params(labelsize=7)
+        known = resample(g, t, world).known_mask()
+        owner[known & (owner < 0)] = k
+    ax = fig.add_subplot(gs[:, 2:])
+    img = owner_image(world, owner)
+    shown = (owner >= 0) | world.occupied_mask()
+    img[~shown & world.known_mask()] = 0.93  # the world no map covers: pale
+    _imshow_rgb(ax, world, img)
+    tints = [1.0 - _TINT * (1.0 - np.array(to_rgb(robot_colour(k)))) for k in range(n)]
+    from matplotlib.patches import Patch
+
+    extra = _legend_patches(tints, [f"seen by {names[k]}" for k in range(n)])
+    extra.append(Patch(facecolor=(0.93, 0.93, 0.93), edgecolor="0.3", label="seen by none"))
+    state_legend(ax, extra, free=False)
+    ax.set_title(title if title is not None else
+                 f"The truth: where the {n} maps lie in {world.name or 'the world'}")
+    return fig
+
+
+#: Colours of :func:`plot_on_truth`: unknown, world only, free, missed wall, wrong wall, right wall.
+_TRUTH_COLOURS = ("#c8c8c8", "#ededed", "#cfe8c9", "#6f9fe0", "#d62728", "#1a1a1a")
+
+
+def plot_on_truth(ax, fused: OccupancyGrid, world: OccupancyGrid, transform, *,
+                  title: str | None = None, legend: bool = True):
+    """A fused map placed in the world (by ``transform``: its frame -> the world's) over the
+    ground truth: walls on true walls black, walls where the world has none red, true walls the
+    map missed blue, mapped free space pale green."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    placed = resample(fused, transform, world).data
+    img = np.zeros(world.shape, np.int8)
+    img[world.data >= 0] = 1
+    img[(placed >= 0) & (placed < 50)] = 2
+    img[world.data >= 50] = 3
+    img[placed >= 50] = 4
+    img[(placed >= 50) & (world.data >= 50)] = 5
+    x0, y0 = world.origin[0], world.origin[1]
+    extent = (x0, x0 + world.cols * world.resolution, y0, y0 + world.rows * world.resolution)
+    ax.imshow(img, origin="lower", extent=extent, cmap=ListedColormap(_TRUTH_COLOURS), vmin=-0.5,
+              vmax=5.5, interpolation="nearest")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    if title:
+        ax.set_title(title)
+    if legend:
+        labels = ("unknown in both", "known in the world only", "free in the map",
+                  "true wall the map misses", "wall off the truth", "wall on the truth")
+        ax.legend(handles=[Patch(facecolor=c, edgecolor="0.3", label=s)
+                           for c, s in zip(_TRUTH_COLOURS[1:], labels[1:])],
+                  loc="upper right", fontsize=7, framealpha=0.9)
+
+
+def _payload_grid(p: dict) -> OccupancyGrid:
+    return OccupancyGrid(np.asarray(p["data"], np.int8), float(p["resolution"]),
+                         tuple(float(v) for v in p["origin"]))
+
+
+def plot_bench_case(record: dict, *, cols: int = 3):
+    """Every method's fused map of one benchmark case, over the truth.
+
+    Parameters
+    ----------
+    record : dict
+        :func:`fusionkit.bench.run_case` with ``keep_grids=True``.
+    cols : int
+        Panels per row.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    grids = record.get("_grids")
+    if grids is None:
+        raise InputError("this case record holds no grids; run it with keep_grids=True")
+    world = _payload_grid(grids["world"])
+    ref_true = Transform2D.from_dict(grids["ref_true"])
+    methods = list(record["methods"])
+    cols = max(1, min(cols, len(methods)))
+    rows = int(np.ceil(len(methods) / cols))
+    known = np.nonzero(world.known_mask())
+    aspect = (np.ptp(known[0]) + 1) / max(np.ptp(known[1]) + 1, 1)
+    fig = _new_figure(5.2 * cols, 5.2 * aspect * rows + 0.8)
+    axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
+    word = {"success": "right", "wrong": "WRONG", "refused": "refused"}
+    for i, (ax, m) in enumerate(zip(axes, methods)):
+        rec = record["methods"][m]
+        states = ", ".join(f"map {e['map'] + 1} {word.get(e['status'], e['status'])}"
+                           for e in rec["maps"])
+        plot_on_truth(ax, _payload_grid(grids["fused"][m]), world, ref_true,
+                      title=f"{m}\n{states}", legend=(i == len(methods) - 1))
+        ax.title.set_fontsize(9)
+        r0, r1 = known[0].min(), known[0].max() + 1
+        c0, c1 = known[1].min(), known[1].max() + 1
+        ox, oy, res = world.origin[0], world.origin[1], world.resolution
+        ax.set_xlim(ox + c0 * res, ox + c1 * res)
+        ax.set_ylim(oy + r0 * res, oy + r1 * res)
+    for ax in axes[len(methods):]:
+        ax.set_visible(False)
+    fig.suptitle(f"Case {record['index']}: {record['robots']} maps of {record['world']} "
+                 f"({record['mode']}), each method's fused map placed in the world by the "
+                 f"reference map's true pose")
+    return fig
+
+
+def plot_bench_summary(summary: dict, *, by: str = "mode"):
+    """The benchmark's outcome per method: successes, wrong merges and refusals of the pairs
+    (left), and the success rate broken down by ``by`` (``"mode"``, ``"robots"``,
+    ``"overlap"`` or ``"world"``, right).
+
+    Parameters
+    ----------
+    summary : dict
+        :func:`fusionkit.bench.summarize`.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    methods = list(summary["methods"])
+    fig = _new_figure(15.0, 0.55 * len(methods) + 3.2)
+    a1, a2 = fig.subplots(1, 2)
+    y = np.arange(len(methods))[::-1]
+    left = np.zeros(len(methods))
+    for key, colour, label in (("success", "tab:green", "success"), ("wrong", "tab:red", "wrong merge"),
+                               ("refused", "0.7", "refused")):
+        v = np.array([summary["methods"][m][key] for m in methods], float)
+        a1.barh(y, v, left=left, color=colour, edgecolor="k", linewidth=0.4, label=label)
+        left += v
+    a1.set_yticks(y, methods)
+    a1.set_xlabel("pairs (a map and its reference)")
+    a1.set_title("Outcome of every pair, per method")
+    a1.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    a1.grid(axis="x", alpha=0.3)
+    groups = list(summary["by"][by])
+    width = 0.8 / max(len(groups), 1)
+    for j, g in enumerate(groups):
+        rates = []
+        for m in methods:
+            t = summary["by"][by][g].get(m)
+            rates.append(t["success_rate"] if t and t["success_rate"] is not None else np.nan)
+        a2.barh(y + (len(groups) - 1) / 2 * width - j * width, rates, width, label=f"{by} {g}",
+                edgecolor="k", linewidth=0.4, color=f"C{j}")
+    a2.set_yticks(y, methods)
+    a2.set_xlim(0, 100)
+    a2.set_xlabel("success rate (%) of the linked pairs")
+    a2.set_title(f"Success rate by {by}")
+    a2.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    a2.grid(axis="x", alpha=0.3)
+    return fig
+
+
 _METRICS = (("completeness", "Completeness"), ("accuracy", "Accuracy"),
             ("precision", "Precision"), ("efficiency", "Efficiency"))
 
@@ -1207,7 +1413,8 @@ def plot_table1(rows, *, oracle=None, paper: bool = True, title: str | None = No
         ax.set_ylim(0, 105)
         ax.grid(axis="y", alpha=0.3)
     axes[0].set_ylabel("percent (%)")
-    axes[0].legend(loc="lower left", fontsize=8, framealpha=0.95)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=len(series), fontsize=9)
     fig.suptitle(title if title is not None else
                  "Table 1 as bars (the paper's Fig. 5): each metric after each fusion step")
     return fig
@@ -1221,4 +1428,5 @@ __all__ += ["robot_colour", "owner_image", "plot_fused", "plot_merge", "plot_sca
             "plot_swarm_snapshots", "plot_convergence", "plot_masks", "plot_cells",
             "plot_cell_fusion", "plot_fusion_steps", "plot_table1", "state_legend", "plot_worlds",
             "plot_unique_in_world", "plot_rho_overview", "plot_pairing", "plot_surfaces",
-            "plot_pso_run", "plot_mask_panels"]
+            "plot_pso_run", "plot_mask_panels", "plot_case", "plot_on_truth", "plot_bench_case",
+            "plot_bench_summary"]

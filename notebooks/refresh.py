@@ -6,9 +6,10 @@
 Each notebook runs in its own fresh ``python3`` kernel, started in the notebook's folder with
 the same environment the tests give it (the shared numba cache of ``conftest.py``), and the
 outputs are stored exactly as ``pytest --nbval`` collects them, so a refreshed notebook passes
-the strict comparison. Interactive widgets are not stored (their model ids change every run);
-the figure a slider cell draws for its default values is. A cell that raises stops the run
-and leaves that notebook unchanged.
+the strict comparison. A slider cell (one that displays a widget) is stored without outputs:
+widget model ids change every run, nbval does not compare such cells, and the figure it draws
+for its default values is the one shown by a plain cell before it. A cell that raises stops
+the run and leaves that notebook unchanged.
 
 Needs only the test extra (``jupyter_client``, ``ipykernel``, ``nbformat``).
 """
@@ -64,6 +65,7 @@ def run_notebook(path: Path) -> float:
                 continue
             msg_id = kc.execute(cell.source, allow_stdin=False)
             outputs = []
+            widget = False
             while True:
                 try:
                     msg = kc.get_iopub_msg(timeout=CELL_TIMEOUT)
@@ -82,9 +84,10 @@ def run_notebook(path: Path) -> float:
                     count = content["execution_count"]
                 if kind in ("stream", "display_data", "execute_result"):
                     if kind != "stream" and WIDGET_MIME in content.get("data", {}):
+                        widget = True
                         continue
                     outputs.append(nbformat.v4.output_from_msg(msg))
-            cell.outputs = _coalesce(outputs)
+            cell.outputs = [] if widget else _coalesce(outputs)
             cell.execution_count = count
             for o in cell.outputs:
                 if o.output_type == "execute_result":

@@ -88,3 +88,15 @@ def test_overlap_score_separates_right_from_wrong_placement():
     s_wrong, _ = overlap_score(a, b, Transform2D(0.7, 0.5, 0.2) @ right)
     assert s_right > 0.95 and n > 100
     assert s_wrong < 0.5
+
+
+def test_more_seeds_than_particles_fill_the_swarm_with_the_best():
+    ref = _room_points()
+    truth = Transform2D(1.2, -0.7, 2.0)
+    mov = truth.inverse(ref)
+    seeds = [truth] + [Transform2D(5.0, 5.0, 0.0)] * 30
+    cfg = AlignmentConfig(pso=PSOConfig(particles=5, iterations=5))
+    al = align_points(ref, mov, 0.1, config=cfg, seeds=seeds, seed=0)
+    assert len(al.seeds) == 5
+    dt, dr = al.transform.error_to(truth)
+    assert dt < 0.1 and dr < 0.02

@@ -4,7 +4,8 @@
    ``i -> k`` does. A pair that breaks more loops than it closes is dropped.
 2. An ambiguous pair (several distinct placements verify) is decided by loops through a third
    map: when exactly one of its placements closes a loop with the other two pairs, it is taken.
-3. A maximum spanning tree by confidence, grown from the reference map, chains the placements.
+3. A maximum spanning tree, grown from the reference map, chains the placements; a link's weight
+   is its evidence (agreeing wall cells net of misfits, :meth:`Check.quality`).
 4. Every two placed maps are then checked against each other directly; a pair of placed maps
    that overlaps but disagrees reveals a wrong link, and the weakest link of the tree path
    between them is cut (the maps beyond it are left out unless another path places them).
@@ -53,12 +54,12 @@ class GraphResult:
 
 
 def _edge(edges: dict, i: int, j: int):
-    """``(transform j -> i, confidence)`` of an accepted pair, or None."""
+    """``(transform j -> i, confidence, weight)`` of an accepted pair, or None."""
     if (i, j) in edges:
         return edges[(i, j)]
     if (j, i) in edges:
-        t, c = edges[(j, i)]
-        return t.inverse, c
+        t, c, w = edges[(j, i)]
+        return t.inverse, c, w
     return None
 
 
@@ -82,7 +83,9 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     n = len(indexes)
     res = indexes[reference].resolution
     tol = cfg.loop_cells * res
-    edges = {(p.a, p.b): (p.transform, p.confidence) for p in pairs.values() if p.accepted}
+    # weight: the evidence of the placement (agreeing walls net of misfits)
+    edges = {(p.a, p.b): (p.transform, p.confidence, p.best.check.quality())
+             for p in pairs.values() if p.accepted}
     ambiguous = {(p.a, p.b): p.plausible for p in pairs.values() if p.ambiguous}
     dropped: list = []
     resolved: list = []
@@ -104,7 +107,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
         worst = [e for e in edges if bad[e] > good[e]]
         if not worst:
             break
-        e = min(worst, key=lambda e: (good[e] - bad[e], edges[e][1]))
+        e = min(worst, key=lambda e: (good[e] - bad[e], edges[e][2]))
         dropped.append(e)
         del edges[e]
 
@@ -128,7 +131,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                                 closing.add(m)
             if len(closing) == 1:
                 m = closing.pop()
-                edges[(i, j)] = (cands[m].transform, cands[m].check.score)
+                edges[(i, j)] = (cands[m].transform, cands[m].check.score, cands[m].check.quality())
                 del ambiguous[(i, j)]
                 resolved.append((i, j))
                 changed = True
@@ -143,15 +146,15 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
         tree = []
         while True:
             best = None
-            for (i, j), (t, c) in edges.items():
-                for p, q, tq in ((i, j, None), (j, i, None)):
+            for (i, j), (t, c, w) in edges.items():
+                for p, q in ((i, j), (j, i)):
                     if transforms[p] is not None and transforms[q] is None:
-                        if best is None or c > best[0]:
-                            best = (c, p, q)
+                        if best is None or w > best[0]:
+                            best = (w, p, q)
             if best is None:
                 break
-            c, p, q = best
-            t_pq = _edge(edges, p, q)[0]                  # q -> p
+            _, p, q = best
+            t_pq, c, _ = _edge(edges, p, q)                # q -> p
             transforms[q] = transforms[p] @ t_pq
             conf[q] = c
             parent[q] = p
@@ -172,7 +175,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
             if worst is not None:
                 _, a, b = worst
                 path = _tree_path(parent, a, b)
-                cut = min(path, key=lambda e: _edge(edges, *e)[1])
+                cut = min(path, key=lambda e: _edge(edges, *e)[2])
         if cut is None:
             break
         key = cut if cut in edges else (cut[1], cut[0])

@@ -32,6 +32,8 @@ class MapIndex:
         Known and occupied cells.
     near : (rows, cols) bool
         Cells within one cell (8-neighbourhood) of an occupied cell.
+    usable : (rows, cols) uint8
+        1 where the map is known or beside a wall: where another map's walls can be paired.
     clear : (rows, cols) bool
         Free cells at least ``clear_cells`` cells (Euclidean, about) from every occupied cell: a
         wall of another map drawn there contradicts this map.
@@ -60,6 +62,7 @@ class MapIndex:
     known: np.ndarray
     occupied: np.ndarray
     near: np.ndarray
+    usable: np.ndarray
     clear: np.ndarray
     dist: np.ndarray
     nearest: np.ndarray
@@ -143,6 +146,7 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     reach = 2 * clear_cells - 1
     walls_close = cv2.dilate(occ8, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach))).astype(bool)
     clear = free & ~walls_close
+    usable = (known | near).astype(np.uint8)
     r, c = np.nonzero(occupied)
     points = tri.cell_to_world(r, c)
     if len(points) > max_refine_points:
@@ -151,7 +155,7 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     else:
         refine = points
     if log is None or log.n_scans == 0:
-        return MapIndex(tri, known, occupied, near, clear, dist, nearest, points,
+        return MapIndex(tri, known, occupied, near, usable, clear, dist, nearest, points,
                         np.ascontiguousarray(refine), log, bool(virtual), np.zeros(0, np.int64),
                         np.zeros((0, 0), np.float32), np.zeros((0, 0), np.complex64))
     idx = spread_indices(log.poses, pose_spacing, max_poses)
@@ -163,5 +167,5 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     spec = (spec / norm).astype(np.float32)                     # dot product = Pearson (eq. 2)
     centred = ranges - ranges.mean(axis=1, keepdims=True)
     rfft = np.fft.rfft(centred, axis=1).astype(np.complex64)
-    return MapIndex(tri, known, occupied, near, clear, dist, nearest, points,
+    return MapIndex(tri, known, occupied, near, usable, clear, dist, nearest, points,
                     np.ascontiguousarray(refine), log, bool(virtual), idx, spec, rfft)

@@ -28,14 +28,19 @@ class ConsensusConfig:
         Least verification score (:class:`~fusionkit.consensus.Check`, 0..1) for a placement.
     min_overlap_cells : int
         Least number of wall cells of each map that must land where the other map is known.
+    min_overlap_fraction : float
+        ... and at least this fraction of the smaller map's wall cells.
+    min_agreement : float
+        Least evidence (:meth:`Check.quality` times the cell size, in metres of wall) for a
+        placement: a perfect fit of a small patch of wall is not enough to merge.
     max_conflict : float
         Largest fraction of wall cells allowed on the other map's clear free space.
     rival : float
-        A second, distinct placement that passes the thresholds with a quality
-        (:meth:`Check.quality`) of at least ``rival`` times the best one's makes the pair
-        ambiguous: it is then only merged when a loop through a third map decides.
+        A second, distinct placement whose score is at least ``accept - margin`` and whose
+        quality (:meth:`Check.quality`) is at least ``rival`` times the best one's makes the
+        pair ambiguous: it is then only merged when a loop through a third map decides.
     margin : float
-        Slack (score) of the cross checks between placed maps.
+        Slack (score) of the rival test and of the cross checks between placed maps.
     distinct_cells : float
         Two placements are distinct when some corner of the moving map's known area moves by
         more than this many cells between them.
@@ -70,6 +75,8 @@ class ConsensusConfig:
 
     accept: float = 0.9
     min_overlap_cells: int = 100
+    min_overlap_fraction: float = 0.1
+    min_agreement: float = 20.0
     max_conflict: float = 0.03
     rival: float = 0.6
     margin: float = 0.04
@@ -99,6 +106,10 @@ class ConsensusConfig:
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < (0 if name in (
                     "min_overlap_cells", "scan_clusters") else 1):
                 raise InputError(f"{name} must be a whole number >= 1, got {v!r}")
+        if not 0.0 <= self.min_overlap_fraction <= 1.0:
+            raise InputError(f"min_overlap_fraction is a fraction in [0, 1], got {self.min_overlap_fraction}")
+        if not (math.isfinite(self.min_agreement) and self.min_agreement >= 0):
+            raise InputError(f"min_agreement must be >= 0 m, got {self.min_agreement}")
         for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
@@ -137,7 +148,8 @@ class PairResult:
     ambiguous : bool
         Whether it passes the thresholds but a distinct rival does too.
     plausible : tuple of Candidate
-        Every distinct candidate that passes the thresholds, best first.
+        Every distinct candidate that passes the thresholds, best first; for an ambiguous pair
+        the best one, its rivals and those.
     best : Candidate or None
     refined : tuple of Candidate
         Every distinct candidate refined and verified, best first.
@@ -181,8 +193,10 @@ def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
     return float(np.sqrt(((t1(pts) - t2(pts)) ** 2).sum(axis=1)).max())
 
 
-def _plausible(chk: Check, cfg: ConsensusConfig) -> bool:
+def _plausible(chk: Check, cfg: ConsensusConfig, resolution: float, walls: int) -> bool:
     return (chk.score >= cfg.accept and chk.overlap >= cfg.min_overlap_cells
+            and chk.overlap >= cfg.min_overlap_fraction * walls
+            and chk.quality() * resolution >= cfg.min_agreement
             and chk.conflict_fraction <= cfg.max_conflict)
 
 
@@ -231,22 +245,39 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         if chk.quality() >= best.rank:
             best = Candidate(t, chk, best.source)
             refined[0] = best
+    walls = min(len(a.points), len(b.points))
     plausible = []
     for c in refined:
-        if _plausible(c.check, cfg) and all(displacement(c.transform, p.transform, box)
+        if _plausible(c.check, cfg, res, walls) and all(displacement(c.transform, p.transform, box)
                                             > cfg.distinct_cells * res for p in plausible):
             plausible.append(c)
-    ok = _plausible(best.check, cfg)
-    rivals = [c for c in plausible[1:] if c.rank >= cfg.rival * best.rank]
+    ok = _plausible(best.check, cfg, res, walls)
+    # a rival need not pass every threshold itself: fitting nearly as well elsewhere is enough
+    # to make the best placement unsure
+    rivals = []
+    for c in refined[1:]:
+        if (c.check.score >= cfg.accept - cfg.margin and c.rank >= cfg.rival * best.rank
+                and displacement(c.transform, best.transform, box) > cfg.distinct_cells * res):
+            rivals.append(c)
     accepted = ok and not rivals
+    if ok and rivals:
+        # the placements a loop through a third map may choose from
+        options = [best] + rivals
+        options += [c for c in plausible if all(displacement(c.transform, o.transform, box)
+                                                > cfg.distinct_cells * res for o in options)]
+        plausible = options
     chk = best.check
     if accepted:
         reason = ""
     elif ok:
         reason = (f"ambiguous: {len(rivals) + 1} distinct placements agree on "
                   f"{100 * min(r.check.score for r in rivals):.0f}-{100 * chk.score:.0f}% of the walls")
-    elif chk.overlap < cfg.min_overlap_cells:
-        reason = f"best placement overlaps only {chk.overlap} wall cells (needs {cfg.min_overlap_cells})"
+    elif chk.overlap < max(cfg.min_overlap_cells, cfg.min_overlap_fraction * walls):
+        reason = (f"best placement overlaps only {chk.overlap} wall cells (needs "
+                  f"{max(cfg.min_overlap_cells, math.ceil(cfg.min_overlap_fraction * walls))})")
+    elif chk.quality() * res < cfg.min_agreement:
+        reason = (f"best placement agrees on too few walls ({chk.quality() * res:.1f} m net of "
+                  f"misfits, needs {cfg.min_agreement:g} m)")
     elif chk.score < cfg.accept:
         reason = (f"best placement agrees on {100 * chk.score:.0f}% of the overlapping walls "
                   f"(needs {100 * cfg.accept:.0f}%)")

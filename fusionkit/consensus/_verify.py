@@ -50,9 +50,10 @@ def rigid_fit(src: np.ndarray, dst: np.ndarray) -> Transform2D:
 
 
 @njit
-def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, gates, iterations, min_pairs, settle):
+def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, usable, gates, iterations, min_pairs, settle):
     """ICP in A's cell frame (units: cells). ``pts`` are B's points already in cell units of a
-    frame aligned with A's cells; returns ``(tx, ty, th, pairs)`` of the final motion."""
+    frame aligned with A's cells; only points landing on ``usable`` cells (A known) are paired.
+    Returns ``(tx, ty, th, pairs)`` of the final motion."""
     rows, cols = dist.shape
     n = pts.shape[0]
     pairs = 0
@@ -72,7 +73,7 @@ def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, gates, iterations, min_pa
                 y = s * pts[k, 0] + c * pts[k, 1] + ty
                 ci = int(math.floor(x))
                 ri = int(math.floor(y))
-                if 0 <= ri < rows and 0 <= ci < cols and dist[ri, ci] <= gate:
+                if 0 <= ri < rows and 0 <= ci < cols and usable[ri, ci] and dist[ri, ci] <= gate:
                     sx += pts[k, 0]
                     sy += pts[k, 1]
                     dx += near_c[ri, ci] + 0.5
@@ -92,7 +93,7 @@ def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, gates, iterations, min_pa
                 y = s * pts[k, 0] + c * pts[k, 1] + ty
                 ci = int(math.floor(x))
                 ri = int(math.floor(y))
-                if 0 <= ri < rows and 0 <= ci < cols and dist[ri, ci] <= gate:
+                if 0 <= ri < rows and 0 <= ci < cols and usable[ri, ci] and dist[ri, ci] <= gate:
                     px = pts[k, 0] - sx
                     py = pts[k, 1] - sy
                     qx = near_c[ri, ci] + 0.5 - dx
@@ -129,6 +130,9 @@ def refine_icp(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
                gates=DEFAULT_GATES, iterations: int = 10) -> Transform2D:
     """Iterative closest points from ``start`` (B -> A) with pairs read off A's distance field.
 
+    Only B's points that land where A is known are paired: a wall of B in A's unexplored space
+    has no counterpart in A, and pairing it with A's nearest wall would pull the fit.
+
     Parameters
     ----------
     a : MapIndex
@@ -146,7 +150,7 @@ def refine_icp(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
     c = _to_cells(a, start)
     pts = np.ascontiguousarray(points_b / a.resolution, np.float64)
     tx, ty, th, _ = _icp_kernel(pts, c.x, c.y, c.theta, a.dist, a.nearest[0], a.nearest[1],
-                                np.asarray(gates, np.float64), int(iterations), 10, 0.05)
+                                a.usable, np.asarray(gates, np.float64), int(iterations), 10, 0.05)
     return _from_cells(a, Transform2D(tx, ty, th))
 
 
@@ -160,7 +164,7 @@ def refine_icp_numpy(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
         for _ in range(iterations):
             ri, ci, inside = a.cells(t(points_b))
             ok = np.zeros(len(points_b), bool)
-            ok[inside] = a.dist[ri[inside], ci[inside]] <= gate
+            ok[inside] = (a.dist[ri[inside], ci[inside]] <= gate) & a.usable[ri[inside], ci[inside]].astype(bool)
             if ok.sum() < 10:
                 return t
             dst = a.grid.cell_to_world(a.nearest[0, ri[ok], ci[ok]], a.nearest[1, ri[ok], ci[ok]])

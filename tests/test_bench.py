@@ -1,0 +1,126 @@
+"""``fusionkit bench``: cases are reproducible, every method runs on the same cases, the figures
+add up, the files are written, and a folder without a usable map is refused clearly."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit.bench import (BenchConfig, WorldSpec, find_worlds, make_case, plan_cases, run_bench,
+                             summarize, write_outputs)
+from fusionkit.cli import main
+from fusionkit.errors import InputError
+from fusionkit.grid import OccupancyGrid
+from fusionkit.mapio import save_map
+from fusionkit.resample import resample
+
+CAVE = WorldSpec("cave", builtin="cave")
+OFFICE = WorldSpec("office", builtin="office")
+
+
+def _strip(cases):
+    """The records without wall times (which vary from run to run)."""
+    out = []
+    for rec in cases:
+        rec = json.loads(json.dumps(rec, default=float))
+        rec.pop("build_seconds")
+        for m in rec["methods"].values():
+            m.pop("seconds")
+            m.pop("seconds_per_pair")
+        out.append(rec)
+    return out
+
+
+def test_plan_cycles_worlds_modes_and_map_counts():
+    cfg = BenchConfig(cases=8, robots=(2, 3), modes=("explore", "crop"))
+    specs = plan_cases([CAVE, OFFICE], cfg)
+    assert [s.world.name for s in specs] == ["cave", "office"] * 4
+    assert [s.mode for s in specs] == ["explore", "explore", "crop", "crop"] * 2
+    assert {(s.mode, s.robots) for s in specs} == {(m, k) for m in ("explore", "crop") for k in (2, 3)}
+    assert len({s.seed for s in specs}) == 8
+    assert plan_cases([CAVE, OFFICE], cfg) == specs
+
+
+def test_crop_case_truth_puts_every_crop_back_on_the_world():
+    cfg = BenchConfig(cases=1, robots=(3,), modes=("crop",), seed=5)
+    case = make_case(plan_cases([OFFICE], cfg)[0], cfg)
+    assert len(case.grids) == 3 and all(case.linked)
+    world = case.world
+    for g, t in zip(case.grids, case.truth):
+        back = resample(g, t, world).data
+        walls = back >= 50
+        assert walls.sum() > 100
+        # the crop's walls land on the world's walls (nearest-neighbour resampling twice)
+        near = np.zeros_like(walls)
+        w = world.occupied_mask()
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                near |= np.roll(np.roll(w, dr, 0), dc, 1)
+        assert (walls & near).sum() / walls.sum() > 0.97
+    for i in range(3):
+        assert max(case.overlap[i, j] for j in range(3) if j != i) >= cfg.min_overlap
+
+
+def test_bench_runs_end_to_end_and_writes_its_files(tmp_path):
+    cfg = BenchConfig(methods=("consensus", "map-merge"), modes=("crop", "explore"), cases=2,
+                      robots=(3,), poses=400, seed=2)
+    result = run_bench([CAVE], cfg, command="fusionkit bench --cases 2")
+    assert len(result.cases) == 2
+    s = summarize(result)
+    for m in cfg.methods:
+        t = s["methods"][m]
+        assert t["success"] + t["refused"] + t["wrong"] >= t["pairs"] - t["unlinked"]
+        assert t["pairs"] + t["unlinked"] == 2 * 2
+        assert t["median_seconds_per_pair"] is not None and t["median_seconds_per_pair"] > 0
+        for rec in result.cases:
+            for e in rec["methods"][m]["maps"]:
+                if e["status"] == "success":
+                    assert e["rot_err_deg"] < 2 and e["trans_err_cells"] < 3
+                elif e["status"] == "wrong":
+                    assert e["rot_err_deg"] >= 2 or e["trans_err_cells"] >= 3
+    paths = write_outputs(result, tmp_path, s)
+    names = {p.name for p in paths}
+    assert {"bench.md", "bench.json", "bench_consensus.png", "bench_map-merge.png"} <= names
+    for p in paths:
+        assert p.stat().st_size > 0
+    assert (tmp_path / "bench_consensus.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    doc = json.loads((tmp_path / "bench.json").read_text())
+    assert doc["summary"]["methods"]["consensus"]["pairs"] == s["methods"]["consensus"]["pairs"]
+    assert len(doc["cases"]) == 2
+    md = (tmp_path / "bench.md").read_text()
+    assert "| consensus |" in md and "fusionkit bench --cases 2" in md and "By overlap" in md
+
+
+def test_results_do_not_depend_on_the_number_of_processes():
+    cfg = BenchConfig(methods=("consensus", "map-merge"), modes=("crop",), cases=2, robots=(2,), seed=9)
+    one = run_bench([CAVE, OFFICE], cfg, jobs=1)
+    two = run_bench([CAVE, OFFICE], cfg, jobs=2)
+    assert _strip(one.cases) == _strip(two.cases)
+
+
+def test_a_folder_without_a_usable_map_is_refused(tmp_path, capsys):
+    tiny = OccupancyGrid(np.zeros((20, 20), np.int8), 0.05)
+    save_map(tiny, tmp_path / "tiny.yaml")
+    (tmp_path / "broken.yaml").write_text("image: missing.pgm\nresolution: 0.05\norigin: [0, 0, 0]\n")
+    with pytest.raises(InputError, match="no usable ground-truth map"):
+        find_worlds([tmp_path])
+    code = main(["bench", str(tmp_path), "--cases", "1", "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "no usable ground-truth map" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out" / "bench.json").exists()
+    with pytest.raises(InputError, match="no such folder"):
+        find_worlds([tmp_path / "nowhere"])
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(InputError, match="unknown method"):
+        BenchConfig(methods=("magic",))
+    with pytest.raises(InputError):
+        BenchConfig(robots=(1,))
+    with pytest.raises(InputError):
+        BenchConfig(min_overlap=0.9, max_overlap=0.5)

@@ -1,0 +1,217 @@
+"""The consensus method: it recovers a known motion, refuses maps that do not overlap, chains
+five simulated robots consistently, and its pieces agree with plain references."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit.baselines import crop_pair, placement_error
+from fusionkit.consensus import (Check, ConsensusConfig, PairResult, estimate_maps, estimate_pair,
+                                 prepare_maps, verify)
+from fusionkit.consensus._graph import solve_graph
+from fusionkit.consensus._hypotheses import Hypotheses, cluster_hypotheses
+from fusionkit.consensus._pair import Candidate, corners
+from fusionkit.consensus._verify import refine_icp, refine_icp_numpy, rigid_fit
+from fusionkit.errors import InputError
+from fusionkit.grid import OccupancyGrid
+from fusionkit.mapio import load_map
+from fusionkit.pipeline import METHODS, MergeConfig, merge
+from fusionkit.transform import Transform2D
+from fusionkit.worlds import make_world
+
+REPO = Path(__file__).resolve().parents[1]
+REAL = REPO / "maps" / "real"
+if not (REAL / "intel_lab.yaml").is_file():
+    REAL = REPO.parent / "shared" / "maps" / "real"
+
+
+@pytest.fixture(scope="module")
+def intel() -> OccupancyGrid:
+    return load_map(REAL / "intel_lab.yaml")
+
+
+@pytest.fixture(scope="module")
+def crop(intel):
+    """Two 200-cell windows of the Intel lab, the second turned and moved into its own frame."""
+    return crop_pair(intel, np.random.default_rng(3), size=200, min_overlap=0.4)
+
+
+def within(t: Transform2D, truth: Transform2D, moving: OccupancyGrid, res: float) -> bool:
+    d, r = placement_error(t, truth, moving)
+    return r < math.radians(2.0) and d < 3 * res
+
+
+# -- pieces against plain references --------------------------------------------------------------
+
+def test_rigid_fit_recovers_a_motion_exactly():
+    rng = np.random.default_rng(1)
+    src = rng.uniform(-5, 5, (50, 2))
+    t = Transform2D(1.3, -0.4, 2.2)
+    fit = rigid_fit(src, t(src))
+    assert fit.is_close(t, atol=1e-9)
+
+
+def test_icp_kernel_matches_the_numpy_reference(crop):
+    a, b = prepare_maps([crop.a, crop.b])
+    start = Transform2D(crop.truth.x + 0.25, crop.truth.y - 0.2, crop.truth.theta + 0.03)
+    fast = refine_icp(a, b.refine_points, start)
+    slow = refine_icp_numpy(a, b.refine_points, start)
+    dt, dr = fast.error_to(slow)
+    assert dt < 1e-6 and dr < 1e-9
+    assert within(fast, crop.truth, crop.b, crop.a.resolution)
+
+
+def test_verification_prefers_the_true_placement(crop):
+    a, b = prepare_maps([crop.a, crop.b])
+    right = verify(a, b, crop.truth)
+    wrong = verify(a, b, Transform2D(crop.truth.x + 1.0, crop.truth.y, crop.truth.theta))
+    turned = verify(a, b, crop.truth @ Transform2D(0, 0, 0.2))
+    assert right.score > 0.97 and right.conflicts <= 2
+    assert right.quality() > wrong.quality() and right.quality() > turned.quality()
+    assert wrong.score < 0.8 and turned.score < 0.8
+
+
+def test_clustering_finds_the_agreeing_hypotheses():
+    rng = np.random.default_rng(2)
+    truth = np.array([2.0, -1.0, 0.5])
+    good = truth + rng.normal(0, [0.1, 0.1, 0.01], (40, 3))
+    bad = np.column_stack([rng.uniform(-10, 10, (60, 2)), rng.uniform(-math.pi, math.pi, 60)])
+    params = np.vstack([bad, good])
+    h = Hypotheses(params, np.ones(len(params)), np.zeros((len(params), 2), np.int64))
+    clusters = cluster_hypotheses(h, max_clusters=3)
+    best = clusters[0]
+    assert best.size >= 35
+    assert math.hypot(best.transform.x - 2.0, best.transform.y + 1.0) < 0.1
+    assert abs(best.transform.theta - 0.5) < 0.02
+
+
+# -- pairs ------------------------------------------------------------------------------------------
+
+def test_recovers_a_known_rotation_and_translation_on_a_crop(crop):
+    est = estimate_pair(crop.a, crop.b)
+    assert est.accepted
+    assert within(est.transform, crop.truth, crop.b, crop.a.resolution)
+    assert 0.9 <= est.confidence <= 1.0
+
+
+def test_refuses_maps_that_do_not_overlap(intel):
+    data = intel.trinary()
+    a = OccupancyGrid(data[:200, :200], intel.resolution, intel.origin)
+    far = intel.cell_to_world(379.5, 379.5)
+    b = OccupancyGrid(data[380:580, 380:580], intel.resolution, (float(far[0]), float(far[1]), 0.0))
+    est = estimate_pair(a, b)
+    assert not est.accepted
+    result = merge([a, b], config=MergeConfig(method="consensus"))
+    assert not result.placements[1].merged
+    assert result.placements[1].transform is None
+    assert result.placements[1].reason
+
+
+def test_refuses_maps_of_different_buildings():
+    office = make_world("office", 3, size=(20.0, 16.0))
+    cave = make_world("cave", 3, size=(20.0, 16.0))
+    result = merge([office, cave], config=MergeConfig(method="consensus"))
+    assert not result.placements[1].merged
+
+
+# -- N maps -----------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def five_robots():
+    from fusionkit.simulate import SimulationConfig, simulate
+    world = make_world("office", 0, size=(24.0, 18.0))
+    return simulate(world, SimulationConfig(robots=5, poses=900, seed=4))
+
+
+def test_chains_five_simulated_robots_consistently(five_robots):
+    sim = five_robots
+    grids = [r.grid for r in sim.robots]
+    scans = [r.scans for r in sim.robots]
+    result = merge(grids, scans=scans, config=MergeConfig(method="consensus", reference=0))
+    ref = sim.robots[0].transform
+    assert result.all_merged
+    for r, p in zip(sim.robots, result.placements):
+        truth = ref.inverse @ r.transform
+        assert within(p.transform, truth, r.grid, sim.world.resolution), p.name
+    # every map is placed by one chain from the reference, each link fused once
+    assert len(result.fusion_order) == 4
+    assert sorted(result.order) == [0, 1, 2, 3, 4]
+    assert result.report()["method"] == "consensus"
+
+
+def test_a_map_from_elsewhere_is_left_out_of_a_chain(five_robots):
+    sim = five_robots
+    grids = [r.grid for r in sim.robots[:3]] + [make_world("cave", 1, size=(20.0, 16.0))]
+    scans = [r.scans for r in sim.robots[:3]] + [None]
+    result = merge(grids, scans=scans, config=MergeConfig(method="consensus"))
+    assert [p.merged for p in result.placements] == [True, True, True, False]
+
+
+def _pair(a, b, t, score=0.99, ok=True, plausible=()):
+    chk = Check(score, score, score, 500, 1000, 10, 0, 0.0)
+    best = Candidate(t, chk, "walls")
+    return PairResult(a, b, t, score, ok and not plausible, bool(plausible),
+                      tuple(plausible) or (best,), best)
+
+
+def _boxes(n):
+    return [np.array([[0.0, 0.0], [5.0, 0.0], [0.0, 5.0], [5.0, 5.0]])] * n
+
+
+def test_a_loop_through_a_third_map_decides_an_ambiguous_pair():
+    t01 = Transform2D(1.0, 0.0, 0.3)
+    t12 = Transform2D(0.0, 2.0, -0.5)
+    t02 = t01 @ t12
+    alias = Transform2D(t02.x + 3.0, t02.y, t02.theta)
+    cands = tuple(Candidate(t, Check(0.98, 0.98, 0.98, 400, 800, 5, 0, 0.0), "walls") for t in (alias, t02))
+    pairs = {(0, 1): _pair(0, 1, t01), (1, 2): _pair(1, 2, t12),
+             (0, 2): _pair(0, 2, alias, plausible=cands)}
+    cfg = ConsensusConfig(final_check=False)
+    g = solve_graph(pairs, _fake_indexes(3), 0, cfg, _boxes(3))
+    assert (0, 2) in g.resolved
+    assert g.transforms[2].error_to(t02)[0] < 1e-9
+
+
+def test_a_pair_that_breaks_loops_is_dropped():
+    t01 = Transform2D(1.0, 0.0, 0.3)
+    t12 = Transform2D(0.0, 2.0, -0.5)
+    t23 = Transform2D(-1.0, 1.0, 0.2)
+    t02, t13 = t01 @ t12, t12 @ t23
+    wrong = Transform2D(t02.x + 4.0, t02.y - 1.0, t02.theta + 0.4)
+    pairs = {(0, 1): _pair(0, 1, t01), (1, 2): _pair(1, 2, t12), (2, 3): _pair(2, 3, t23),
+             (1, 3): _pair(1, 3, t13), (0, 3): _pair(0, 3, t01 @ t13),
+             (0, 2): _pair(0, 2, wrong, score=0.995)}
+    g = solve_graph(pairs, _fake_indexes(4), 0, ConsensusConfig(final_check=False), _boxes(4))
+    assert (0, 2) in g.dropped
+    assert g.transforms[2].error_to(t02)[0] < 1e-9
+    assert g.transforms[3].error_to(t02 @ t23)[0] < 1e-9
+
+
+def _fake_indexes(n):
+    class _Res:
+        resolution = 0.1
+    return [_Res()] * n
+
+
+# -- the same interface for every method ------------------------------------------------------------
+
+def test_every_method_is_reachable_through_merge(crop):
+    assert {"consensus", "map-merge", "hough-spectrum", "fourier-mellin", "spectral-pso"} <= set(METHODS)
+    for method in ("consensus", "map-merge"):
+        result = merge([crop.a, crop.b], config=MergeConfig(method=method))
+        assert result.config.method == method
+        assert result.placements[0].transform.is_close(Transform2D.identity())
+        assert within(result.placements[1].transform, crop.truth, crop.b, crop.a.resolution), method
+
+
+def test_bad_settings_are_refused():
+    with pytest.raises(InputError):
+        ConsensusConfig(accept=1.5)
+    with pytest.raises(InputError):
+        ConsensusConfig(rotation_peaks=0)
+    with pytest.raises(InputError):
+        estimate_maps([make_world("cave", 0, size=(12.0, 10.0))])
