@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from fusionkit.pipeline import MergeConfig
 from fusionkit_tui import make_app
 from fusionkit_tui.screens.export import ConfirmScreen, ExportScreen
 from fusionkit_tui.screens.help import HelpScreen
+from fusionkit_tui.screens.main import MainScreen
 from fusionkit_tui.widgets.map_picker import MapTree
 from fusionkit_tui.widgets.map_preview import (FREE_RANK, OCCUPIED_RANK, STATE_COLOURS, UNKNOWN_RANK,
                                                downsample, preview_strips)
@@ -61,6 +63,7 @@ async def until(pilot, condition, timeout: float = 60.0) -> None:
 
 async def ready(pilot) -> None:
     """The directory tree and the first preview are loaded."""
+    await until(pilot, lambda: any(isinstance(s, MainScreen) and s.query(MapTree) for s in pilot.app.screen_stack))
     screen = pilot.app.main
     tree = screen.query_one(MapTree)
     await until(pilot, lambda: len(tree.root.children) > 0)
@@ -84,9 +87,10 @@ async def run_merge(pilot, settings=FAST) -> None:
     for k, v in settings.items():
         await type_setting(pilot, k, v)
     await pilot.press("ctrl+r")
-    await pilot.pause()
-    assert screen.merging or screen.result is not None, [n.message for n in app._notifications]
-    await app.workers.wait_for_complete([w for w in app.workers if w.group == "merge"])
+    merging = [w for w in app.workers if w.group == "merge"]
+    assert merging or screen.result is not None, [n.message for n in app._notifications]
+    if merging:  # (an empty list would wait for every worker, the tree's loader too)
+        await app.workers.wait_for_complete(merging)
     await until(pilot, lambda: not screen.merging)
     await pilot.pause()
 
@@ -155,7 +159,7 @@ def test_a_run_directory_selects_its_robot_maps_not_the_world(in_root):
 
 
 # -- the whole flow -------------------------------------------------------------------------------
-async def test_select_run_inspect_export_and_the_export_loads_back(in_root, tmp_path):
+async def test_select_run_inspect_export_and_the_export_loads_back(in_root):
     app = make_app(["run"])
     async with app.run_test(size=(100, 32)) as pilot:
         await ready(pilot)
@@ -200,9 +204,8 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root, tmp_
         assert metrics.display and metrics.row_count == len(result.order)
         assert 0 < screen.evaluation.metrics.completeness <= 100
 
-        # export to a path the operator types
-        out = tmp_path / "exported" / "merged.yaml"
-        out.parent.mkdir()
+        # export to a path the operator types; a directory that is not there is refused at once
+        out = Path("exported") / "merged.yaml"  # relative to the working directory, as typed
         await pilot.press("e")
         await pilot.pause()
         assert isinstance(app.screen, ExportScreen)
@@ -210,12 +213,18 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root, tmp_
         inp.value = ""
         await pilot.press(*str(out), "enter")
         await pilot.pause()
+        assert isinstance(app.screen, ExportScreen) and not out.parent.exists()
+        assert "does not exist" in str(app.screen.query_one("#export-error").render())
+        out.parent.mkdir()
+        await pilot.press("enter")
+        await pilot.pause()
         assert not isinstance(app.screen, ExportScreen)
         grid = load_map(out)
         assert np.array_equal(grid.data, result.grid.trinary())
         report = json.loads(out.with_name("merged.report.json").read_text())
         assert [m["input"] for m in report["maps"]] == [str(p) for p in screen.maps.selected]
         assert report["output"] == str(out)
+        assert out.resolve().parent == (in_root / "exported").resolve()
 
         # exporting again asks first; "n" keeps the files, "y" replaces them
         stamp = out.stat().st_mtime_ns
@@ -237,19 +246,24 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root, tmp_
         assert out.stat().st_mtime_ns != stamp - 10**9
         assert screen.exported is not None and screen.exported.yaml == out
 
-        # an input map is never overwritten: the export is refused with a notification
+        # an input map is never overwritten: the dialog refuses the path
         await pilot.press("e")
         await pilot.pause()
-        inp = app.screen.query_one(Input)
-        inp.value = "run/robot_1.yaml"
-        before = (in_root / "run" / "robot_1.pgm").read_bytes()
+        app.screen.query_one(Input).value = "run/robot_1.yaml"
         await pilot.press("enter")
         await pilot.pause()
-        if isinstance(app.screen, ConfirmScreen):
-            await pilot.press("y")
-            await pilot.pause()
+        assert isinstance(app.screen, ExportScreen)
+        assert "overwrite the input" in str(app.screen.query_one("#export-error").render())
+        await pilot.press("escape")
+        await pilot.pause()
+        assert not isinstance(app.screen, ExportScreen)
+        # and so does the export itself, dialog or not
+        before = (in_root / "run" / "robot_1.pgm").read_bytes()
+        assert screen.export("run/robot_1.yaml") is None
+        await pilot.pause()
         assert (in_root / "run" / "robot_1.pgm").read_bytes() == before
-        assert any(n.severity == "error" for n in app._notifications)
+        assert any(n.severity == "error" and "overwrite the input" in n.message
+                   for n in app._notifications)
 
     # the exported map is what `fusionkit evaluate` reads
     assert main(["evaluate", str(out), "--truth", str(in_root / "run" / "truth.json"), "--json"]) == 0

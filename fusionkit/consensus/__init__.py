@@ -168,4 +168,17 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
     boxes = [corners(ix) for ix in indexes]
     graph = solve_graph(pairs, indexes, reference, config, boxes)
     seconds["graph"] = time.perf_counter() - t0
+    left = [k for k in range(n) if graph.transforms[k] is None]
+    if config.fallback and left:
+        # a map left out: search its undecided pairs again, exhaustively
+        t0 = time.perf_counter()
+        redo = [(i, j) for (i, j), p in pairs.items() if (i in left or j in left) and not p.accepted]
+        for s, (i, j) in enumerate(redo):
+            if callback is not None:
+                callback("align", s, len(redo), (i, j))
+            pairs[(i, j)] = estimate_indexed(indexes[i], indexes[j], config, hist_a=hists[i],
+                                             hist_b=hists[j], evidence_a=evidence[i], ia=i, ib=j,
+                                             seed=seed, exhaustive=True)
+        graph = solve_graph(pairs, indexes, reference, config, boxes)
+        seconds["fallback"] = time.perf_counter() - t0
     return MapsResult(pairs, graph, tuple(indexes), seconds)

@@ -7,20 +7,26 @@
 3. A maximum spanning tree, grown from the reference map, chains the placements; a link's weight
    is its evidence (agreeing wall cells net of misfits, :meth:`Check.quality`).
 4. Every two placed maps are then checked against each other directly; a pair of placed maps
-   that overlaps but disagrees reveals a wrong link, and the weakest link of the tree path
-   between them is cut (the maps beyond it are left out unless another path places them).
+   that overlaps but disagrees (even after a refinement within the loop tolerance, which
+   absorbs the small errors a chain accumulates) reveals a wrong link, and the weakest link of
+   the tree path between them is cut (the maps beyond it are left out unless another path
+   places them).
+5. Optionally (``pose_graph``, on by default) the placements are adjusted by least squares over
+   every accepted link consistent with them, so that loops share out the links' small errors.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from ..transform import Transform2D
 from ._pair import ConsensusConfig, PairResult, displacement
-from ._verify import verify
+from ._verify import refine_icp, verify
 
 __all__ = ["GraphResult", "solve_graph"]
 
@@ -167,11 +173,9 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                 if parent[b] == a or parent[a] == b:
                     continue
                 t_ba = transforms[a].inverse @ transforms[b]
-                chk = verify(indexes[a], indexes[b], t_ba)
-                if chk.overlap >= cfg.min_overlap_cells and (
-                        chk.score < cfg.accept - cfg.margin or chk.conflict_fraction > 2 * cfg.max_conflict):
-                    if worst is None or chk.score < worst[0]:
-                        worst = (chk.score, a, b)
+                chk = _cross_check(indexes[a], indexes[b], t_ba, cfg, boxes[b], tol)
+                if chk is not None and (worst is None or chk.score < worst[0]):
+                    worst = (chk.score, a, b)
             if worst is not None:
                 _, a, b = worst
                 path = _tree_path(parent, a, b)
@@ -181,6 +185,9 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
         key = cut if cut in edges else (cut[1], cut[0])
         dropped.append(key)
         del edges[key]
+
+    if cfg.pose_graph:
+        transforms = _pose_graph(transforms, edges, boxes, reference, tol)
 
     reasons = []
     for k in range(n):
@@ -198,6 +205,71 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                            "no confident placement against any other map")
     return GraphResult(tuple(transforms), tuple(float(c) for c in conf), tuple(tree),
                        tuple(dropped), tuple(resolved), tuple(reasons))
+
+
+def _pose_graph(transforms: list, edges: dict, boxes: list, reference: int, tol: float) -> list:
+    """Least-squares placement of the placed maps over every accepted link that agrees with
+    the tree (within the loop tolerance).
+
+    Each link ``(i, j)`` measures map j in map i's frame; its residual is how far the four
+    corners of map j's known area land from where the link puts them (m), weighted by the
+    square root of the link's evidence. With one link per map (a tree) the placement does not
+    change; with loops the small errors of the links are spread over them instead of piling up
+    along a chain.
+    """
+    placed = [k for k in range(len(transforms)) if transforms[k] is not None and k != reference]
+    links = []
+    for (i, j), (t, _, w) in edges.items():
+        if transforms[i] is None or transforms[j] is None or w <= 0:
+            continue
+        pred = transforms[i].inverse @ transforms[j]
+        if displacement(pred, t, boxes[j]) <= tol:
+            links.append((i, j, t, math.sqrt(w)))
+    if not placed or len(links) <= len(placed):
+        return transforms
+    index = {k: n for n, k in enumerate(placed)}
+    x0 = np.array([[transforms[k].x, transforms[k].y, transforms[k].theta] for k in placed]).ravel()
+
+    def pose(x, k):
+        if k == reference:
+            return transforms[reference]
+        v = x[3 * index[k]: 3 * index[k] + 3]
+        return Transform2D(v[0], v[1], v[2])
+
+    def residuals(x):
+        out = []
+        for i, j, t, w in links:
+            pred = pose(x, i).inverse @ pose(x, j)
+            out.append(w * (pred(boxes[j]) - t(boxes[j])).ravel())
+        return np.concatenate(out)
+
+    sol = least_squares(residuals, x0, method="lm" if len(links) * 8 >= x0.size else "trf")
+    if not sol.success:
+        return transforms
+    out = list(transforms)
+    for k in placed:
+        out[k] = pose(sol.x, k)
+    return out
+
+
+def _disagrees(chk, cfg: ConsensusConfig) -> bool:
+    return chk.overlap >= cfg.min_overlap_cells and (
+        chk.score < cfg.accept - cfg.margin or chk.conflict_fraction > 2 * cfg.max_conflict)
+
+
+def _cross_check(a, b, t_ba: Transform2D, cfg: ConsensusConfig, box_b, tol: float):
+    """The :class:`Check` of two placed maps when they disagree, else None.
+
+    Placed through a chain, two maps carry the small errors of every link; they are let
+    off when a short refinement (within the loop tolerance) makes them agree.
+    """
+    chk = verify(a, b, t_ba)
+    if not _disagrees(chk, cfg):
+        return None
+    t2 = refine_icp(a, b.refine_points, t_ba, gates=(4.0, 3.0, 2.0))
+    if displacement(t2, t_ba, box_b) <= tol and not _disagrees(verify(a, b, t2), cfg):
+        return None
+    return chk
 
 
 def _tree_path(parent: list, a: int, b: int) -> list:

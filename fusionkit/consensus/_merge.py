@@ -129,7 +129,10 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
             counts[i, j] = counts[j, i] = int(bool(e.accepted))
             steps.append(MergeStep(i, j, None, e.transform, float(e.confidence), 0, bool(e.accepted), 0))
         seconds["align"] = time.perf_counter() - t0
-    placed_order = [ref] + [q for _, q in tree]
+    placed_order = [ref]
+    for k in [x for edge in tree for x in edge] + list(range(n)):
+        if transforms[k] is not None and k not in placed_order:
+            placed_order.append(k)
     plan = FusionPlan(counts, tuple(tree), tuple(k for k in range(n) if transforms[k] is None))
 
     t0 = time.perf_counter()

@@ -66,18 +66,28 @@ class ConsensusConfig:
         Wall points used by the refiners.
     pso_refine : bool
         Polish the best candidate with the paper's swarm (eq. 3) in a small box after ICP.
+    fallback : bool
+        When a map is left out, search its pairs again exhaustively: every ``fallback_step``
+        degrees of rotation, three times as many candidates refined.
+    fallback_step : float
+        Rotation step (degrees) of that search.
+    fallback_strictness : float
+        Factor on ``min_overlap_cells`` and ``min_agreement`` for placements found by it.
     loop_cells : float
         Largest disagreement (cells, at the moving map's corners) of a loop of three
         placements for it to count as consistent.
     final_check : bool
-        Check each placed map against all the others fused, and drop it when it disagrees.
+        Check every two placed maps against each other, and cut the weakest link between two
+        that disagree.
+    pose_graph : bool
+        Adjust the placements by least squares over all consistent links (loops).
     """
 
     accept: float = 0.9
     min_overlap_cells: int = 100
-    min_overlap_fraction: float = 0.1
+    min_overlap_fraction: float = 0.15
     min_agreement: float = 20.0
-    max_conflict: float = 0.03
+    max_conflict: float = 0.05
     rival: float = 0.6
     margin: float = 0.04
     distinct_cells: float = 6.0
@@ -92,8 +102,12 @@ class ConsensusConfig:
     max_poses: int = 1500
     max_refine_points: int = 4000
     pso_refine: bool = False
+    fallback: bool = True
+    fallback_step: float = 2.0
+    fallback_strictness: float = 1.5
     loop_cells: float = 8.0
     final_check: bool = True
+    pose_graph: bool = True
 
     def __post_init__(self):
         if not 0.0 < self.accept <= 1.0:
@@ -108,9 +122,11 @@ class ConsensusConfig:
                 raise InputError(f"{name} must be a whole number >= 1, got {v!r}")
         if not 0.0 <= self.min_overlap_fraction <= 1.0:
             raise InputError(f"min_overlap_fraction is a fraction in [0, 1], got {self.min_overlap_fraction}")
+        if not (math.isfinite(self.fallback_strictness) and self.fallback_strictness >= 1):
+            raise InputError(f"fallback_strictness must be >= 1, got {self.fallback_strictness}")
         if not (math.isfinite(self.min_agreement) and self.min_agreement >= 0):
             raise InputError(f"min_agreement must be >= 0 m, got {self.min_agreement}")
-        for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells"):
+        for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells", "fallback_step"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a positive number, got {v!r}")
@@ -193,19 +209,34 @@ def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
     return float(np.sqrt(((t1(pts) - t2(pts)) ** 2).sum(axis=1)).max())
 
 
-def _plausible(chk: Check, cfg: ConsensusConfig, resolution: float, walls: int) -> bool:
-    return (chk.score >= cfg.accept and chk.overlap >= cfg.min_overlap_cells
+def _plausible(chk: Check, cfg: ConsensusConfig, resolution: float, walls: int,
+               strict: float = 1.0) -> bool:
+    return (chk.score >= cfg.accept and chk.overlap >= strict * cfg.min_overlap_cells
             and chk.overlap >= cfg.min_overlap_fraction * walls
-            and chk.quality() * resolution >= cfg.min_agreement
+            and chk.quality() * resolution >= strict * cfg.min_agreement
             and chk.conflict_fraction <= cfg.max_conflict)
 
 
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
-                     evidence_a: EvidenceRaster, ia: int = 0, ib: int = 1, seed=0) -> PairResult:
-    """Place map ``b`` in map ``a`` (both prepared), from every source of candidates."""
+                     evidence_a: EvidenceRaster, ia: int = 0, ib: int = 1, seed=0,
+                     exhaustive: bool = False) -> PairResult:
+    """Place map ``b`` in map ``a`` (both prepared), from every source of candidates.
+
+    With ``exhaustive``, the translation search also runs at every ``fallback_step`` degrees
+    of rotation (for maps whose walls have no dominant directions, such as caves), and three
+    times as many candidates are refined. Testing more hypotheses gives chance fits more
+    opportunities, so the overlap and agreement a placement needs are then
+    ``fallback_strictness`` times higher.
+    """
+    strict = cfg.fallback_strictness if exhaustive else 1.0
     t0 = time.perf_counter()
     starts: list[tuple[Transform2D, str]] = []
     rots = rotation_candidates(hist_a, hist_b, cfg.rotation_peaks)
+    if exhaustive:
+        n = max(4, int(round(360.0 / cfg.fallback_step)))
+        grid = [-math.pi + 2 * math.pi * k / n for k in range(n)]
+        rots += [r for r in grid if all(abs(math.remainder(r - q, 2 * math.pi))
+                                        > math.radians(cfg.fallback_step / 2) for q in rots)]
     n_hyp = 0
     usable = cfg.use_scans and (cfg.virtual_scans or not (a.virtual or b.virtual))
     if usable and len(a.spectra) and len(b.spectra):
@@ -218,11 +249,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
             if all(abs(math.remainder(c.transform.theta - r, 2 * math.pi)) > math.radians(2) for r in rots):
                 rots.append(c.transform.theta)
     wall: list[tuple[float, Transform2D]] = []
+    head = set(rots[: 2 * cfg.rotation_peaks + 2])
     corr = Correlator(evidence_a, b.points)
     for th in rots:
-        wall += [(s, t) for t, s in corr.translations(th, count=cfg.translations)]
+        wall += [(s, t) for t, s in corr.translations(th, count=cfg.translations if th in head else 2)]
     wall.sort(key=lambda st: -st[0])
-    starts += [(t, "walls") for _, t in wall[: cfg.refine_top]]
+    starts += [(t, "walls") for _, t in wall[: cfg.refine_top * (3 if exhaustive else 1)]]
 
     box = corners(b)
     res = a.resolution
@@ -248,10 +280,10 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     walls = min(len(a.points), len(b.points))
     plausible = []
     for c in refined:
-        if _plausible(c.check, cfg, res, walls) and all(displacement(c.transform, p.transform, box)
+        if _plausible(c.check, cfg, res, walls, strict) and all(displacement(c.transform, p.transform, box)
                                             > cfg.distinct_cells * res for p in plausible):
             plausible.append(c)
-    ok = _plausible(best.check, cfg, res, walls)
+    ok = _plausible(best.check, cfg, res, walls, strict)
     # a rival need not pass every threshold itself: fitting nearly as well elsewhere is enough
     # to make the best placement unsure
     rivals = []
@@ -272,12 +304,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     elif ok:
         reason = (f"ambiguous: {len(rivals) + 1} distinct placements agree on "
                   f"{100 * min(r.check.score for r in rivals):.0f}-{100 * chk.score:.0f}% of the walls")
-    elif chk.overlap < max(cfg.min_overlap_cells, cfg.min_overlap_fraction * walls):
+    elif chk.overlap < max(strict * cfg.min_overlap_cells, cfg.min_overlap_fraction * walls):
         reason = (f"best placement overlaps only {chk.overlap} wall cells (needs "
-                  f"{max(cfg.min_overlap_cells, math.ceil(cfg.min_overlap_fraction * walls))})")
-    elif chk.quality() * res < cfg.min_agreement:
+                  f"{math.ceil(max(strict * cfg.min_overlap_cells, cfg.min_overlap_fraction * walls))})")
+    elif chk.quality() * res < strict * cfg.min_agreement:
         reason = (f"best placement agrees on too few walls ({chk.quality() * res:.1f} m net of "
-                  f"misfits, needs {cfg.min_agreement:g} m)")
+                  f"misfits, needs {strict * cfg.min_agreement:g} m)")
     elif chk.score < cfg.accept:
         reason = (f"best placement agrees on {100 * chk.score:.0f}% of the overlapping walls "
                   f"(needs {100 * cfg.accept:.0f}%)")

@@ -261,3 +261,4 @@ def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:
     return Check(min(f_ab, f_ba), f_ab, f_ba, min(n_ab, n_ba), near_ab + near_ba,
                  (n_ab - near_ab) + (n_ba - near_ba), bad_ab + bad_ba,
                  (bad_ab + bad_ba) / total if total else 1.0)
+

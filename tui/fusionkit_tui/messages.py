@@ -19,12 +19,15 @@ class MergeProgress(Message):
 
     ``stage``, ``step``, ``total`` and ``label`` are those of the
     :class:`~fusionkit.pipeline.MergeEvent`; during alignment ``iteration`` and ``best_cost``
-    describe the swarm after its latest iteration (None before the first).
+    describe the swarm after its latest iteration (None before the first) and ``pair`` is the
+    ``(placed, new)`` map indices.
     """
 
     def __init__(self, stage: str, step: int, total: int, label: str,
-                 iteration: int | None = None, best_cost: float | None = None) -> None:
+                 iteration: int | None = None, best_cost: float | None = None,
+                 pair: tuple | None = None) -> None:
         super().__init__()
+        self.pair = pair
         self.stage = stage
         self.step = step
         self.total = total

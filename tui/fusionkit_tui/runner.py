@@ -18,8 +18,8 @@ from fusionkit.errors import FusionkitError, InputError
 from fusionkit.pipeline import MergeConfig, MergeEvent, MergeResult, merge
 
 __all__ = ["MAP_SUFFIXES", "is_map_file", "find_maps", "truth_beside", "Evaluation",
-           "evaluate_result", "ExportPaths", "export_paths", "export_result", "run_merge",
-           "initial_selection"]
+           "evaluate_result", "ExportPaths", "export_paths", "export_result", "protected_files",
+           "run_merge", "initial_selection", "describe_error"]
 
 #: File name endings the map picker lists (map_server YAML).
 MAP_SUFFIXES = (".yaml", ".yml")
@@ -228,6 +228,21 @@ def export_paths(yaml_path) -> ExportPaths:
     return ExportPaths(p, p.with_suffix(".pgm"), p.with_name(p.stem + ".report.json"))
 
 
+def protected_files(inputs: Sequence) -> list[Path]:
+    """Files an export must never replace: each input map, the image it names and its scans."""
+    from fusionkit.mapio import map_info
+    from fusionkit.scanlog import scans_path_for
+
+    out = []
+    for p in map(Path, inputs):
+        out += [p, scans_path_for(p)]
+        try:
+            out.append(Path(map_info(p)["image"]))
+        except (FusionkitError, OSError):
+            pass  # save_map still protects the image an input YAML names
+    return out
+
+
 def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPaths:
     """Write the fused map (YAML + PGM) and the merge report (CONTRACTS section 6).
 
@@ -248,12 +263,11 @@ def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPat
         A bad output name, a missing directory, or an output that is one of the inputs.
     """
     from fusionkit.mapio import save_map
-    from fusionkit.scanlog import scans_path_for
 
     paths = export_paths(yaml_path)
     inputs = [str(p) for p in inputs]
-    protected = inputs + [str(scans_path_for(p)) for p in inputs]
-    check_not_input([paths.report], protected)
+    protected = protected_files(inputs)
+    check_not_input(paths.all, protected)
     save_map(result.grid, paths.yaml, inputs=protected)
     report = result.report(inputs, output=str(paths.yaml))
     write_text_atomic(paths.report, json.dumps(report, indent=2) + "\n")

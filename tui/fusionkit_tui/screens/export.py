@@ -11,6 +11,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Static
 
+from fusionkit._atomic import check_not_input
 from fusionkit.errors import InputError
 
 from ..runner import export_paths
@@ -19,7 +20,11 @@ __all__ = ["ExportScreen", "ConfirmScreen", "overwrite_question"]
 
 
 class ExportScreen(ModalScreen[str | None]):
-    """Ask for the map YAML to write; dismisses with the typed path, or None when cancelled."""
+    """Ask for the map YAML to write; dismisses with the typed path, or None when cancelled.
+
+    ``inputs`` are files the export must not replace (the input maps, images and scans): a
+    path that would is refused in the dialog, as is a directory that does not exist.
+    """
 
     DEFAULT_CSS = """
     ExportScreen {
@@ -55,9 +60,10 @@ class ExportScreen(ModalScreen[str | None]):
 
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, default: str) -> None:
+    def __init__(self, default: str, inputs=()) -> None:
         super().__init__()
         self._default = default
+        self._inputs = list(inputs)
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -85,8 +91,17 @@ class ExportScreen(ModalScreen[str | None]):
             files.update("")
             error.update(str(exc))
             return False
+        where = p.yaml.parent
         files.update(f"writes {p.yaml.name}, {p.image.name} and {p.report.name} in "
-                     f"{p.yaml.parent if str(p.yaml.parent) else '.'}; enter saves, escape cancels")
+                     f"{where}; enter saves, escape cancels")
+        if not where.is_dir():
+            error.update(f"the directory {where} does not exist; create it or choose another")
+            return False
+        try:
+            check_not_input(p.all, self._inputs)
+        except InputError as exc:
+            error.update(str(exc))
+            return False
         error.update("")
         return True
 

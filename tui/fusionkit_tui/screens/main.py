@@ -16,7 +16,8 @@ from fusionkit.errors import FusionkitError, InputError
 from fusionkit.pipeline import MergeCancelled, MergeConfig, MergeEvent
 
 from ..messages import MergeFailed, MergeFinished, MergeProgress, MergeStopped
-from ..runner import ExportPaths, describe_error, evaluate_result, export_paths, export_result, run_merge, truth_beside
+from ..runner import (ExportPaths, describe_error, evaluate_result, export_paths, export_result,
+                      protected_files, run_merge, truth_beside)
 from ..widgets.map_picker import MapsPane, MapTree
 from ..widgets.result_panel import ResultPanel
 from ..widgets.run_panel import RunPanel
@@ -58,6 +59,8 @@ class MainScreen(Screen):
         Binding("4", "show_tab('result')", "Result", show=False),
     ]
 
+    AUTO_FOCUS = "MapTree"
+
     merging: reactive[bool] = reactive(False, bindings=True)
     """A merge is running (from the run until its worker has stopped)."""
 
@@ -81,9 +84,6 @@ class MainScreen(Screen):
             with TabPane("4 Result", id="result"):
                 yield ResultPanel(id="result-panel")
         yield Footer()
-
-    def on_mount(self) -> None:
-        self.query_one(MapTree).focus()
 
     # -- parts -----------------------------------------------------------------------------------
     @property
@@ -171,7 +171,8 @@ class MainScreen(Screen):
             pso = ev.pso
             self.post_message(MergeProgress(ev.stage, ev.step, ev.total, ev.label,
                                             None if pso is None else pso.iteration,
-                                            None if pso is None else float(pso.best_cost)))
+                                            None if pso is None else float(pso.best_cost),
+                                            ev.pair))
             return False
 
         try:
@@ -182,7 +183,7 @@ class MainScreen(Screen):
         except (FusionkitError, OSError, MemoryError) as exc:
             self.post_message(MergeFailed(describe_error(exc)))
             return
-        except Exception as exc:  # a bug must not take the operator's session down
+        except Exception as exc:  # a bug must not take the operator's UI down
             self.post_message(MergeFailed(f"the merge failed unexpectedly: {describe_error(exc)}"))
             return
         evaluation, evaluation_error = None, None
@@ -256,7 +257,8 @@ class MainScreen(Screen):
         if self.result is None:
             self.notify("nothing to export yet: run a merge first (r)", severity="warning")
             return
-        self.app.push_screen(ExportScreen(self.default_export_path()), self._export_to)
+        self.app.push_screen(ExportScreen(self.default_export_path(), protected_files(self.inputs)),
+                             self._export_to)
 
     def _export_to(self, path: str | None) -> None:
         if path is None:

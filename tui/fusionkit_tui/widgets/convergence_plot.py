@@ -4,12 +4,16 @@ from __future__ import annotations
 
 from textual_plotext import PlotextPlot
 
-__all__ = ["ConvergencePlot"]
+__all__ = ["ConvergencePlot", "MONO_MARKERS"]
+
+#: Markers of the successive lines when there is no colour (``NO_COLOR``).
+MONO_MARKERS = ("braille", "+", "x", "o", "*", "#", "@", "%")
 
 
 class ConvergencePlot(PlotextPlot):
-    """One line per alignment (``"robot_2 -> robot_1"``): the swarm's best cost after each
-    iteration. Feed it with :meth:`start` and :meth:`add`; :meth:`reset` empties it."""
+    """One line per swarm (``"robot_2 -> robot_1"``, then its local refinement): the best cost
+    after each iteration. Feed it with :meth:`start` and :meth:`add`; :meth:`reset` empties it.
+    The legend is left to the caller (plotext's own would cover the lines)."""
 
     DEFAULT_CSS = """
     ConvergencePlot {
@@ -21,19 +25,26 @@ class ConvergencePlot(PlotextPlot):
     def __init__(self, *, id: str | None = None) -> None:
         super().__init__(id=id)
         self._series: list[tuple[str, list[int], list[float]]] = []
+        self._colours: list[str | None] = []
 
     @property
     def series(self) -> list[tuple[str, list[int], list[float]]]:
-        """``(label, iterations, best costs)`` per alignment, in the order they ran."""
+        """``(label, iterations, best costs)`` per swarm, in the order they ran."""
         return self._series
 
+    @property
+    def colours(self) -> list[str | None]:
+        """The colour of each line (``"#rrggbb"``, None for plotext's own)."""
+        return self._colours
+
     def reset(self) -> None:
-        self._series = []
+        self._series, self._colours = [], []
         self.refresh()
 
-    def start(self, label: str) -> None:
-        """Begin a new line for the alignment ``label``."""
+    def start(self, label: str, colour: str | None = None) -> None:
+        """Begin a new line for the swarm ``label``, drawn in ``colour`` (``"#rrggbb"``)."""
         self._series.append((label, [], []))
+        self._colours.append(colour)
         self.refresh()
 
     def add(self, iteration: int, best_cost: float) -> None:
@@ -52,9 +63,16 @@ class ConvergencePlot(PlotextPlot):
         plt.title("PSO best cost per iteration (eq. 3 MSE)")
         plt.xlabel("iteration")
         drawn = False
-        for label, xs, ys in self._series:
+        no_color = bool(getattr(self.app, "no_color", False))
+        for k, ((label, xs, ys), colour) in enumerate(zip(self._series, self._colours)):
             if xs:
-                plt.plot(xs, ys, label=label, marker="braille")
+                # without colour, lines differ by their marker (in the legend's order)
+                marker = MONO_MARKERS[k % len(MONO_MARKERS)] if no_color else "braille"
+                rgb = None if colour is None else tuple(int(colour[i:i + 2], 16) for i in (1, 3, 5))
+                if rgb is None or no_color:
+                    plt.plot(xs, ys, marker=marker)
+                else:
+                    plt.plot(xs, ys, marker=marker, color=rgb)
                 drawn = True
         if not drawn:
             plt.xlim(0, 1)

@@ -218,7 +218,9 @@ class MapsPane(Vertical):
         with Horizontal():
             with Vertical(id="browser"):
                 yield Label("Browse: map YAML files", classes="heading")
-                yield MapTree(self._root, id="tree")
+                # "." would show as a bare dot: name the directory instead
+                root = Path.cwd() if str(self._root) in ("", ".") else self._root
+                yield MapTree(root, id="tree")
             with Vertical(id="chosen"):
                 yield Label("Selected maps (ref = reference frame)", classes="heading")
                 yield SelectedMaps(id="selected")

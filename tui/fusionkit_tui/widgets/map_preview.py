@@ -20,7 +20,7 @@ from textual.widget import Widget
 
 from fusionkit.grid import OccupancyGrid
 
-__all__ = ["MapPreview", "downsample", "preview_strips", "ROBOT_COLOURS", "STATE_COLOURS",
+__all__ = ["MapPreview", "downsample", "preview_strips", "robot_colour", "shade", "ROBOT_COLOURS", "STATE_COLOURS",
            "UNKNOWN_RANK", "FREE_RANK", "OCCUPIED_RANK"]
 
 UNKNOWN_RANK, FREE_RANK, OCCUPIED_RANK = 0, 1, 2
@@ -34,7 +34,7 @@ ROBOT_COLOURS = ("#ff6b6b", "#4dabf7", "#69db7c", "#ffd43b", "#da77f2", "#3bc9db
                  "#a9e34b")
 
 
-def _shade(hex_colour: str, amount: float) -> str:
+def shade(hex_colour: str, amount: float) -> str:
     """``hex_colour`` mixed with the unknown colour (``amount`` of the colour kept)."""
     c = Color.parse(hex_colour).triplet
     b = Color.parse(STATE_COLOURS[0]).triplet
@@ -118,7 +118,7 @@ def _pixel_colours(rank: np.ndarray, owners: np.ndarray | None) -> np.ndarray:
         for k in np.unique(owners[owners >= 0]):
             base = robot_colour(int(k))
             out[(owners == k) & (rank == OCCUPIED_RANK)] = base
-            out[(owners == k) & (rank == FREE_RANK)] = _shade(base, 0.35)
+            out[(owners == k) & (rank == FREE_RANK)] = shade(base, 0.35)
     return out
 
 

@@ -9,7 +9,8 @@ from textual.containers import Vertical
 from textual.widgets import ProgressBar, Static
 
 from ..messages import STAGES, MergeProgress
-from .convergence_plot import ConvergencePlot
+from .convergence_plot import MONO_MARKERS, ConvergencePlot
+from .map_preview import shade, robot_colour
 
 __all__ = ["RunPanel", "overall_fraction"]
 
@@ -49,6 +50,10 @@ class RunPanel(Vertical):
     RunPanel ProgressBar Bar {
         width: 1fr;
     }
+    RunPanel #legend {
+        height: auto;
+        max-height: 2;
+    }
     RunPanel #detail, RunPanel #left {
         height: 1;
         color: $text-muted;
@@ -64,12 +69,14 @@ class RunPanel(Vertical):
         self._step = -1
         self._phase = 0
         self._last_iteration = -1
+        self._where = (0, 0)
 
     def compose(self) -> ComposeResult:
         yield Static("", id="stages")
         yield ProgressBar(total=100, show_eta=False, id="bar")
         yield Static("", id="detail")
         yield Static("", id="left")
+        yield Static("", id="legend")
         yield ConvergencePlot(id="plot")
 
     def on_mount(self) -> None:
@@ -97,6 +104,21 @@ class RunPanel(Vertical):
             text.append(f"   {final}", style="bold")
         return text
 
+    def _legend(self) -> None:
+        """One entry per line of the plot, in its colour."""
+        text = Text()
+        no_color = bool(getattr(self.app, "no_color", False))
+        for k, ((label, _, _), colour) in enumerate(zip(self.plot.series, self.plot.colours)):
+            if text:
+                text.append("  ")
+            if no_color:
+                mark = MONO_MARKERS[k % len(MONO_MARKERS)]
+                text.append(f"{'⠒⠒' if mark == 'braille' else mark * 2} ")
+            else:
+                text.append("━━ ", style=colour or "")
+            text.append(label)
+        self.query_one("#legend", Static).update(text)
+
     def idle(self) -> None:
         """Before any run."""
         self.query_one("#stages", Static).update(self._stages(""))
@@ -107,8 +129,9 @@ class RunPanel(Vertical):
     def begin(self, maps: int, iterations: int) -> None:
         """A merge of ``maps`` maps with up to ``iterations`` PSO iterations per alignment starts."""
         self._iterations = iterations
-        self._stage, self._step = "", -1
+        self._stage, self._step, self._where = "", -1, (0, 0)
         self.plot.reset()
+        self._legend()
         self.query_one(ProgressBar).update(progress=0)
         self.query_one("#stages", Static).update(self._stages("scans"))
         self.query_one("#detail", Static).update(f"merging {maps} maps; escape cancels")
@@ -124,15 +147,19 @@ class RunPanel(Vertical):
         detail = self.query_one("#detail", Static)
         left = self.query_one("#left", Static)
         if ev.stage == "align":
+            colour = robot_colour(ev.pair[1]) if ev.pair else None
             if self._stage != "align" or ev.step != self._step:
-                self.plot.start(ev.label)
+                self.plot.start(ev.label, colour)
                 self._step, self._phase, self._last_iteration = ev.step, 0, -1
+                self._legend()
             if ev.iteration is not None:
                 if ev.iteration <= self._last_iteration:
                     # a second swarm of the same alignment (the local refinement): its own line
                     self._phase += 1
                     self.plot.start(f"{ev.label} refine" if self._phase == 1
-                                    else f"{ev.label} ({self._phase + 1})")
+                                    else f"{ev.label} ({self._phase + 1})",
+                                    None if colour is None else shade(colour, 0.55))
+                    self._legend()
                 self._last_iteration = ev.iteration
                 self.plot.add(ev.iteration, ev.best_cost)
                 phase = "refining" if self._phase else "aligning"
@@ -149,6 +176,7 @@ class RunPanel(Vertical):
             detail.update(f"{what.get(ev.stage, ev.stage)}: {ev.label}")
             left.update(f"{ev.step + 1} of {ev.total}" if ev.total else "")
         self._stage = ev.stage
+        self._where = (ev.step, ev.total)
 
     def finish(self, summary: str) -> None:
         """The merge ended well."""
@@ -159,6 +187,6 @@ class RunPanel(Vertical):
 
     def stopped(self, why: str) -> None:
         """The merge was cancelled or failed: say so, keep the plot as it was."""
-        self.query_one("#stages", Static).update(self._stages(self._stage or ""))
+        self.query_one("#stages", Static).update(self._stages(self._stage or "", *self._where))
         self.query_one("#detail", Static).update(Text(why, style="bold"))
         self.query_one("#left", Static).update("press r to run again")

@@ -121,6 +121,10 @@ def _default_text(s: Setting) -> str:
     return "" if s.default is None else f"{s.default:g}" if isinstance(s.default, float) else str(s.default)
 
 
+_NOTE = ("tab / shift+tab move between fields; an invalid value turns red and blocks the run; "
+         "ctrl+r runs.")
+
+
 class SettingsForm(VerticalScroll):
     """Every merge setting with its default; invalid values are flagged as they are typed."""
 
@@ -188,8 +192,27 @@ class SettingsForm(VerticalScroll):
             yield Checkbox("on", MergeConfig().alignment.seeded, id="seeding", compact=True)
             yield Static("default on: start the swarm also at the transforms of matched scans; "
                          "off: the paper's blind search", classes="hint")
-        yield Static("tab / shift+tab move between fields; invalid values are shown in red and "
-                     "block the run.", id="settings-note")
+        yield Static(_NOTE, id="settings-note")
+
+    def on_descendant_focus(self, event) -> None:
+        self._describe(event.widget)
+
+    def _describe(self, widget) -> None:
+        """Say in full what the field ``widget`` is, and what is wrong with its value."""
+        key = (widget.id or "").removeprefix("set-")
+        note = self.query_one("#settings-note", Static)
+        for s in SETTINGS:
+            if s.key == key and isinstance(widget, Input):
+                default = "blank" if s.default is None else _default_text(s)
+                text = Text(f"{s.label}: {s.help}; {s.allowed()}, default {default}.\n")
+                try:
+                    parse_setting(s, widget.value)
+                except InputError as exc:
+                    text.append(f"{exc}\n", style="bold red")
+                text.append(_NOTE)
+                note.update(text)
+                return
+        note.update(_NOTE)
 
     def _hint(self, s: Setting, failure: str | None) -> None:
         hint = self.query_one(f"#hint-{s.key}", Static)
@@ -208,6 +231,8 @@ class SettingsForm(VerticalScroll):
             if s.key == key:
                 v = event.validation_result
                 self._hint(s, None if v is None or v.is_valid else "; ".join(v.failure_descriptions))
+                if event.input.has_focus:
+                    self._describe(event.input)
                 return
 
     def set_value(self, key: str, text: str) -> None:
