@@ -41,7 +41,7 @@ import os
 import statistics
 import time
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Sequence
@@ -50,7 +50,7 @@ import numpy as np
 
 from ._atomic import atomic_path, write_text_atomic
 from .errors import FusionkitError, InputError
-from .grid import OCCUPIED, UNKNOWN, OccupancyGrid
+from .grid import OCCUPIED, OccupancyGrid
 from .resample import canvas_for, resample
 from .transform import Transform2D
 
@@ -59,8 +59,10 @@ __all__ = ["BenchConfig", "WorldSpec", "CaseSpec", "Case", "find_worlds", "plan_
            "MODES", "DEFAULT_METHODS", "OVERLAP_BINS"]
 
 MODES = ("explore", "crop")
-#: Methods compared by default: fusionkit's two and the classic peers.
-DEFAULT_METHODS = ("consensus", "spectral-pso", "map-merge", "hough-spectrum", "fourier-mellin")
+#: Methods compared by default: fusionkit's two and the classic peers (map-merge with its chaining
+#: corrected and as shipped).
+DEFAULT_METHODS = ("consensus", "spectral-pso", "map-merge", "map-merge-shipped", "hough-spectrum",
+                   "fourier-mellin")
 #: Overlap bins of the breakdown (lower edges).
 OVERLAP_BINS = (0.0, 0.15, 0.3, 0.5)
 #: Fewest occupied cells for a map to be used as a world.
@@ -331,6 +333,12 @@ def _move_walls(data: np.ndarray, fraction: float, rng: np.random.Generator) -> 
     return out
 
 
+def _draw(rng: np.random.Generator, lo: int, hi: int, top: int) -> int:
+    """A whole number in ``[lo, hi]`` clipped to ``[0, top]`` (``lo`` when the range is empty)."""
+    lo, hi = min(max(int(lo), 0), top), min(max(int(hi), 0), top)
+    return int(rng.integers(lo, max(hi, lo) + 1))
+
+
 def _crop_case(spec: CaseSpec, world: OccupancyGrid, config: BenchConfig) -> Case:
     rng = np.random.default_rng(spec.seed)
     data = world.data
@@ -355,8 +363,8 @@ def _crop_case(spec: CaseSpec, world: OccupancyGrid, config: BenchConfig) -> Cas
         wins, masks = [], []
         for _ in range(400):
             if not wins:
-                r0 = int(rng.integers(max(0, r.min() - side // 4), max(1, min(world.rows - side, r.max() - 3 * side // 4) + 1)))
-                c0 = int(rng.integers(max(0, c.min() - side // 4), max(1, min(world.cols - side, c.max() - 3 * side // 4) + 1)))
+                r0 = _draw(rng, r.min() - side // 4, r.max() - 3 * side // 4, world.rows - side)
+                c0 = _draw(rng, c.min() - side // 4, c.max() - 3 * side // 4, world.cols - side)
                 if usable(r0, c0):
                     wins.append((r0, c0))
                     masks.append(window_mask(r0, c0))
@@ -619,7 +627,8 @@ def summarize(result: BenchResult) -> dict:
             median_rot_err_deg=_median(e["rot_err_deg"] for e in merged),
             median_trans_err_cells=_median(e["trans_err_cells"] for e in merged),
             median_rot_err_success_deg=_median(e["rot_err_deg"] for e in merged if e["status"] == "success"),
-            median_trans_err_success_cells=_median(e["trans_err_cells"] for e in merged if e["status"] == "success"),
+            median_trans_err_success_cells=_median(e["trans_err_cells"] for e in merged
+                                                   if e["status"] == "success"),
             median_seconds_per_pair=_median(times),
             errors=errs,
             table1={k: _median(t[k] for t in t1) for k in ("completeness", "accuracy", "precision",
@@ -647,6 +656,10 @@ def _fmt(v, suffix="") -> str:
     return f"{v}{suffix}"
 
 
+def _pct(v) -> str:
+    return "-" if v is None else f"{v:.1f}%"
+
+
 def format_table(result: BenchResult, summary: dict | None = None) -> str:
     """The main per-method table (markdown)."""
     s = summary or summarize(result)
@@ -656,7 +669,7 @@ def format_table(result: BenchResult, summary: dict | None = None) -> str:
     for m, t in s["methods"].items():
         t1 = t["table1"]
         lines.append(
-            f"| {m} | {t['pairs']} | {t['success']} ({_fmt(t['success_rate'], '%')}) | {t['wrong']} | "
+            f"| {m} | {t['pairs']} | {t['success']} ({_pct(t['success_rate'])}) | {t['wrong']} | "
             f"{t['refused']} | {_fmt(t['median_rot_err_deg'])} | {_fmt(t['median_trans_err_cells'])} | "
             f"{_fmt(t1['completeness'])} | {_fmt(t1['accuracy'])} | {_fmt(t1['precision'])} | "
             f"{_fmt(t1['efficiency'])} | {_fmt(t['median_seconds_per_pair'])} |")
@@ -708,9 +721,10 @@ def format_markdown(result: BenchResult, summary: dict | None = None) -> str:
                 if t is None or t["pairs"] == 0:
                     cells.append("-")
                 else:
-                    cells.append(f"{t['success']}/{t['pairs']} ({_fmt(t['success_rate'], '%')}), "
+                    cells.append(f"{t['success']}/{t['pairs']} ({_pct(t['success_rate'])}), "
                                  f"{t['wrong']} wrong")
-            lines.append(f"| {g} | " + " | ".join(cells) + " |")
+            if any(c != "-" for c in cells):
+                lines.append(f"| {g} | " + " | ".join(cells) + " |")
         lines.append("")
     unl = {m: (t["unlinked"], t["unlinked_refused"]) for m, t in s["methods"].items()}
     if any(u for u, _ in unl.values()):

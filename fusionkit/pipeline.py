@@ -54,8 +54,10 @@ class MergeConfig:
     Attributes
     ----------
     method : str
-        ``"spectral-pso"``: the paper's method; ``"consensus"``: verified hypotheses from scans
-        and walls, kept consistent over all maps (:mod:`fusionkit.consensus`); ``"map-merge"``,
+        ``"spectral-pso"`` (default): the paper's method; ``"consensus"``: verified hypotheses
+        from scans and walls, kept consistent over all maps, refused when unsure
+        (:mod:`fusionkit.consensus`; ahead of the paper's method and the peers in
+        ``fusionkit bench``, see BENCHMARKS.md); ``"map-merge"``,
         ``"map-merge-shipped"``, ``"hough-spectrum"``, ``"fourier-mellin"``: the classic peers
         (:mod:`fusionkit.baselines`). The settings below are the paper's method's unless noted.
     sub_sec : int

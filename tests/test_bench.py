@@ -4,8 +4,6 @@ add up, the files are written, and a folder without a usable map is refused clea
 from __future__ import annotations
 
 import json
-import math
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -14,8 +14,8 @@ from fusionkit.consensus import (Check, ConsensusConfig, PairResult, estimate_ma
                                  prepare_maps, verify)
 from fusionkit.consensus._graph import solve_graph
 from fusionkit.consensus._hypotheses import Hypotheses, cluster_hypotheses
-from fusionkit.consensus._pair import Candidate, corners
-from fusionkit.consensus._verify import refine_icp, refine_icp_numpy, rigid_fit
+from fusionkit.consensus._pair import Candidate
+from fusionkit.consensus._verify import refine_cloud, refine_icp, refine_icp_numpy, rigid_fit
 from fusionkit.errors import InputError
 from fusionkit.grid import OccupancyGrid
 from fusionkit.mapio import load_map
@@ -75,6 +75,22 @@ def test_verification_prefers_the_true_placement(crop):
     assert wrong.score < 0.8 and turned.score < 0.8
 
 
+def test_scan_cloud_refinement_recovers_a_motion_beyond_the_grid():
+    from scipy.spatial import cKDTree
+    rng = np.random.default_rng(5)
+    # walls of a room with a few inner walls, sampled every 2 cm
+    segs = [((0, 0), (8, 0)), ((8, 0), (8, 5)), ((8, 5), (0, 5)), ((0, 5), (0, 0)),
+            ((3, 0), (3, 2.5)), ((5, 5), (5, 3)), ((1, 3.5), (2.5, 3.5))]
+    pts = np.concatenate([np.linspace(p, q, int(np.hypot(q[0] - p[0], q[1] - p[1]) / 0.02))
+                          for p, q in segs])
+    truth = Transform2D(0.7, -0.3, 0.4)
+    b = truth.inverse(pts[rng.permutation(len(pts))[: len(pts) // 2]]) + rng.normal(0, 0.005, (len(pts) // 2, 2))
+    start = Transform2D(truth.x + 0.15, truth.y - 0.1, truth.theta + 0.02)
+    t = refine_cloud(pts, cKDTree(pts), b, start)
+    dt, dr = t.error_to(truth)
+    assert dt < 0.01 and dr < math.radians(0.1)
+
+
 def test_clustering_finds_the_agreeing_hypotheses():
     rng = np.random.default_rng(2)
     truth = np.array([2.0, -1.0, 0.5])
@@ -96,6 +112,13 @@ def test_recovers_a_known_rotation_and_translation_on_a_crop(crop):
     assert est.accepted
     assert within(est.transform, crop.truth, crop.b, crop.a.resolution)
     assert 0.9 <= est.confidence <= 1.0
+
+
+def test_virtual_scans_can_join_the_grid_search(crop):
+    est = estimate_pair(crop.a, crop.b, config=ConsensusConfig(virtual_scans=True))
+    pair = est.diagnostics["pair"]
+    assert pair.hypotheses > 0                      # scans were cast and matched
+    assert est.accepted and within(est.transform, crop.truth, crop.b, crop.a.resolution)
 
 
 def test_refuses_maps_that_do_not_overlap(intel):
@@ -189,6 +212,25 @@ def test_a_pair_that_breaks_loops_is_dropped():
     assert (0, 2) in g.dropped
     assert g.transforms[2].error_to(t02)[0] < 1e-9
     assert g.transforms[3].error_to(t02 @ t23)[0] < 1e-9
+
+
+def test_a_lone_fit_of_a_map_with_repeated_structure_needs_a_loop():
+    # map 2 fits map 1 in two places equally well (repeated structure); its single fit with
+    # map 0 is no stronger, and no loop confirms it: map 2 is left out rather than guessed
+    t01 = Transform2D(1.0, 0.0, 0.3)
+    opts = tuple(Candidate(Transform2D(x, 1.0, 0.0), Check(0.99, 0.99, 0.99, 400, 800, 5, 0, 0.0), "walls")
+                 for x in (2.0, 6.0))
+    lone = Transform2D(-7.0, 3.0, 1.2)
+    pairs = {(0, 1): _pair(0, 1, t01), (1, 2): _pair(1, 2, opts[0].transform, plausible=opts),
+             (0, 2): _pair(0, 2, lone)}
+    g = solve_graph(pairs, _fake_indexes(3), 0, ConsensusConfig(final_check=False), _boxes(3))
+    assert g.transforms[2] is None and (0, 2) in g.dropped
+    assert "repeats" in g.reasons[2]
+    # the same fit closing a loop with map 1's placement and one of its options is used
+    pairs[(0, 2)] = _pair(0, 2, t01 @ opts[1].transform)
+    g = solve_graph(pairs, _fake_indexes(3), 0, ConsensusConfig(final_check=False), _boxes(3))
+    assert g.transforms[2] is not None
+    assert g.transforms[2].error_to(t01 @ opts[1].transform)[0] < 1e-6
 
 
 def _fake_indexes(n):

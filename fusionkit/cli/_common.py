@@ -75,7 +75,11 @@ def add_merge_options(p) -> None:
     d = MergeConfig()
     g = p.add_argument_group("method settings")
     g.add_argument("--method", choices=METHODS, default=d.method,
-                   help=f"merging method (default {d.method}: the paper's DFT + Pearson + PSO)")
+                   help=f"merging method (default {d.method}). spectral-pso: the paper's DFT + "
+                        f"Pearson + PSO (the settings below are its own); consensus: hypotheses "
+                        f"from scans and walls, each verified on the whole maps, kept consistent "
+                        f"over all maps, refused when unsure; map-merge, map-merge-shipped, "
+                        f"hough-spectrum, fourier-mellin: the classic peers")
     g.add_argument("--seed", type=int, default=d.seed, help=f"seed of every random step (default {d.seed})")
     g.add_argument("--theta", type=float_range(-1, 1), default=d.theta,
                    help=f"Pearson rho above which two unique poses agree (eq. 2; default {d.theta})")

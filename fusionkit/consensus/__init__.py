@@ -28,6 +28,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
+from scipy.spatial import cKDTree
+
 from ..errors import InputError
 from ..grid import OccupancyGrid
 from ..scanlog import ScanLog
@@ -70,9 +72,12 @@ def prepare_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None]
     return out
 
 
-def _pair(indexes, hists, evidence, cfg, i, j, seed) -> PairResult:
+def _pair(indexes, hists, evidence, trees, cfg, i, j, seed, exhaustive=False) -> PairResult:
+    if len(indexes[i].cloud) and i not in trees:
+        trees[i] = cKDTree(indexes[i].cloud)
     return estimate_indexed(indexes[i], indexes[j], cfg, hist_a=hists[i], hist_b=hists[j],
-                            evidence_a=evidence[i], ia=i, ib=j, seed=seed)
+                            evidence_a=evidence[i], ia=i, ib=j, seed=seed, exhaustive=exhaustive,
+                            tree_a=trees.get(i))
 
 
 def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None = None,
@@ -158,11 +163,12 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
     seconds["prepare"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     pairs = {}
+    trees: dict = {}
     todo = list(itertools.combinations(range(n), 2))
     for s, (i, j) in enumerate(todo):
         if callback is not None:
             callback("align", s, len(todo), (i, j))
-        pairs[(i, j)] = _pair(indexes, hists, evidence, config, i, j, seed)
+        pairs[(i, j)] = _pair(indexes, hists, evidence, trees, config, i, j, seed)
     seconds["pairs"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     boxes = [corners(ix) for ix in indexes]
@@ -176,9 +182,8 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
         for s, (i, j) in enumerate(redo):
             if callback is not None:
                 callback("align", s, len(redo), (i, j))
-            pairs[(i, j)] = estimate_indexed(indexes[i], indexes[j], config, hist_a=hists[i],
-                                             hist_b=hists[j], evidence_a=evidence[i], ia=i, ib=j,
-                                             seed=seed, exhaustive=True)
+            pairs[(i, j)] = _pair(indexes, hists, evidence, trees, config, i, j, seed,
+                                  exhaustive=True)
         graph = solve_graph(pairs, indexes, reference, config, boxes)
         seconds["fallback"] = time.perf_counter() - t0
     return MapsResult(pairs, graph, tuple(indexes), seconds)

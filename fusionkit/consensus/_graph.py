@@ -1,5 +1,8 @@
 """Placing N maps consistently from their pairwise results.
 
+0. A map that fits another map about equally well in several places (an ambiguous pair) has
+   repeated structure; a single fit of it with a third map that is not clearly stronger than
+   those is only used once a loop confirms it (it joins the ambiguous pairs otherwise).
 1. Loops of three accepted pairs are checked: going ``i -> j -> k`` must put map ``k`` where
    ``i -> k`` does. A pair that breaks more loops than it closes is dropped.
 2. An ambiguous pair (several distinct placements verify) is decided by loops through a third
@@ -25,7 +28,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..transform import Transform2D
-from ._pair import ConsensusConfig, PairResult, displacement
+from ._pair import ConsensusConfig, displacement
 from ._verify import refine_icp, verify
 
 __all__ = ["GraphResult", "solve_graph"]
@@ -98,6 +101,37 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
 
     def consistent(i, j, k, tij, tjk, tik) -> bool:
         return displacement(tij @ tjk, tik, boxes[k]) <= tol
+
+    # 0. a map that fits another map in several places about equally well (an ambiguous pair)
+    #    has repeated structure: a single fit of it elsewhere that is not clearly stronger than
+    #    those may be one more alias, so it must be confirmed by a loop before it is used
+    repeated: dict = {}
+    for (i, j), cands in ambiguous.items():
+        q = max(c.check.quality() for c in cands)
+        for k in (i, j):
+            repeated[k] = max(repeated.get(k, 0.0), q)
+    doubtful = {e for e, (_, _, w) in edges.items()
+                if max(repeated.get(e[0], 0.0), repeated.get(e[1], 0.0)) >= cfg.rival * w}
+    demoted = []
+    for (i, j) in sorted(doubtful):
+        confirmed = False
+        for k in range(n):
+            if k in (i, j):
+                continue
+            # the other two pairs: accepted, or at most one of them ambiguous (one of its options)
+            for t_ik, key_ik in _options(edges, ambiguous, i, k):
+                for t_kj, key_kj in _options(edges, ambiguous, k, j):
+                    if key_ik is not None and key_kj is not None:
+                        continue
+                    if consistent(i, k, j, t_ik, t_kj, edges[(i, j)][0]):
+                        confirmed = True
+        if not confirmed:
+            demoted.append((i, j))
+    for (i, j) in demoted:
+        p = pairs[(i, j)]
+        ambiguous[(i, j)] = p.plausible or (p.best,)
+        del edges[(i, j)]
+        dropped.append((i, j))
 
     # 1. loops of three accepted pairs
     while True:
@@ -195,7 +229,10 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
             reasons.append("")
             continue
         mine = [p for p in pairs.values() if k in (p.a, p.b)]
-        if any(p.ambiguous for p in mine):
+        if any(k in e for e in demoted if e not in edges):
+            reasons.append("its structure repeats (it fits another map in several places) and no "
+                           "loop through a third map confirms its one fit")
+        elif any(p.ambiguous for p in mine):
             reasons.append("ambiguous: several placements fit and no loop through a third map decides")
         elif any(p.accepted for p in mine):
             reasons.append("its only confident links disagree with the other maps")

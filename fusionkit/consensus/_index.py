@@ -7,8 +7,7 @@ with row 0 the lowest ``y`` (CONTRACTS 1).
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -17,7 +16,7 @@ from ..grid import OccupancyGrid
 from ..scanlog import ScanLog
 from ..unique_poses import scan_spectra
 
-__all__ = ["MapIndex", "index_map", "spread_indices"]
+__all__ = ["MapIndex", "index_map", "spread_indices", "first_per_cell"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,6 +55,9 @@ class MapIndex:
         product is Pearson's rho (eq. 2).
     ranges_fft : (P, B // 2 + 1) complex64
         FFT of their centred, clipped ranges over beam angle (for the relative heading).
+    cloud : (C, 2) float64
+        Recorded scans only: the end points of the returned beams (m, map frame), one per
+        ``cloud_spacing`` square; empty for virtual or no scans.
     """
 
     grid: OccupancyGrid
@@ -73,6 +75,7 @@ class MapIndex:
     pose_index: np.ndarray
     spectra: np.ndarray
     ranges_fft: np.ndarray
+    cloud: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def resolution(self) -> float:
@@ -103,21 +106,32 @@ def _nearest_walls(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return dist, np.stack([wr.astype(np.int32)[lab], wc.astype(np.int32)[lab]])
 
 
+def first_per_cell(points: np.ndarray, spacing: float) -> np.ndarray:
+    """Indices (ascending) of the first of ``points`` (m) in each ``spacing`` x ``spacing``
+    square of the plane."""
+    if len(points) == 0:
+        return np.zeros(0, np.int64)
+    key = np.floor(points[:, :2] / spacing).astype(np.int64)
+    key -= key.min(axis=0)
+    flat = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]      # one integer per square
+    _, first = np.unique(flat, return_index=True)
+    return np.sort(first)
+
+
 def spread_indices(poses: np.ndarray, spacing: float, limit: int) -> np.ndarray:
     """Indices of at most ``limit`` poses, one per ``spacing`` x ``spacing`` m cell of the
     plane (the first pose in each), then thinned evenly if still too many; ascending."""
     if len(poses) == 0:
         return np.zeros(0, np.int64)
-    key = np.floor(poses[:, :2] / spacing).astype(np.int64)
-    _, first = np.unique(key, axis=0, return_index=True)
-    idx = np.sort(first)
+    idx = first_per_cell(poses, spacing)
     if idx.size > limit:
         idx = idx[np.linspace(0, idx.size - 1, limit).round().astype(np.int64)]
     return idx
 
 
 def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_spacing: float,
-              max_poses: int, max_refine_points: int, clear_cells: int = 3) -> MapIndex:
+              max_poses: int, max_refine_points: int, clear_cells: int = 3,
+              cloud_spacing: float = 0.05) -> MapIndex:
     """Precompute a :class:`MapIndex` for ``grid`` and its scans ``log``.
 
     Parameters
@@ -135,6 +149,8 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
         At most this many wall points are used by the refiners.
     clear_cells : int
         Least distance (cells) from a wall for a free cell to count as clear.
+    cloud_spacing : float
+        Side (m) of the squares the recorded scans' end points are thinned to.
     """
     tri = grid.with_data(grid.trinary())
     occupied = tri.occupied_mask()
@@ -167,5 +183,10 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     spec = (spec / norm).astype(np.float32)                     # dot product = Pearson (eq. 2)
     centred = ranges - ranges.mean(axis=1, keepdims=True)
     rfft = np.fft.rfft(centred, axis=1).astype(np.complex64)
+    cloud = np.zeros((0, 2))
+    if not virtual:
+        ends = log.endpoints(spread_indices(log.poses, 0.5, 400))
+        cloud = ends[first_per_cell(ends, cloud_spacing)]
     return MapIndex(tri, known, occupied, near, usable, clear, dist, nearest, points,
-                    np.ascontiguousarray(refine), log, bool(virtual), idx, spec, rfft)
+                    np.ascontiguousarray(refine), log, bool(virtual), idx, spec, rfft,
+                    np.ascontiguousarray(cloud))

@@ -108,7 +108,8 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
         res = estimate_maps(grids, scans, config=cfg, reference=ref, seed=config.seed,
                             virtual_poses=config.virtual_poses, callback=cb)
         g = res.graph
-        transforms, conf, tree, reasons = list(g.transforms), list(g.confidences), list(g.tree), list(g.reasons)
+        transforms, conf = list(g.transforms), list(g.confidences)
+        tree, reasons = list(g.tree), list(g.reasons)
         for (i, j), p in res.pairs.items():
             ov = p.best.check.overlap if p.best is not None else 0
             steps.append(MergeStep(i, j, None, p.transform, p.confidence, ov,

@@ -7,13 +7,15 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
+from ..alignment import make_field
 from ..errors import InputError
 from ..transform import Transform2D
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, rotation_candidates
-from ._verify import Check, refine_icp, refine_pso, verify
+from ._verify import Check, refine_cloud, refine_icp, refine_pso, verify
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
 
@@ -33,6 +35,11 @@ class ConsensusConfig:
     min_agreement : float
         Least evidence (:meth:`Check.quality` times the cell size, in metres of wall) for a
         placement: a perfect fit of a small patch of wall is not enough to merge.
+    min_agreement_cells : int
+        Least evidence in cells: on coarse grids a few metres of wall are too few cells to pin a
+        placement down to a cell or two (not required of placements refined on recorded scans).
+    cloud_shift : float
+        Largest move (cells) the refinement on recorded scans may make to a placement.
     max_conflict : float
         Largest fraction of wall cells allowed on the other map's clear free space.
     rival : float
@@ -65,14 +72,18 @@ class ConsensusConfig:
     max_refine_points : int
         Wall points used by the refiners.
     pso_refine : bool
-        Polish the best candidate with the paper's swarm (eq. 3) in a small box after ICP.
+        Polish the best candidate, and each candidate that could rival it (at most
+        ``pso_top`` in all), with the paper's swarm (eq. 3) in a small box around it after ICP.
+    pso_top : int
+        See ``pso_refine``.
     fallback : bool
         When a map is left out, search its pairs again exhaustively: every ``fallback_step``
         degrees of rotation, three times as many candidates refined.
     fallback_step : float
         Rotation step (degrees) of that search.
     fallback_strictness : float
-        Factor on ``min_overlap_cells`` and ``min_agreement`` for placements found by it.
+        Factor on ``min_overlap_cells``, ``min_agreement`` and ``min_agreement_cells`` for
+        placements found by it.
     loop_cells : float
         Largest disagreement (cells, at the moving map's corners) of a loop of three
         placements for it to count as consistent.
@@ -87,6 +98,8 @@ class ConsensusConfig:
     min_overlap_cells: int = 100
     min_overlap_fraction: float = 0.15
     min_agreement: float = 20.0
+    min_agreement_cells: int = 300
+    cloud_shift: float = 4.0
     max_conflict: float = 0.05
     rival: float = 0.6
     margin: float = 0.04
@@ -101,7 +114,8 @@ class ConsensusConfig:
     pose_spacing: float = 0.25
     max_poses: int = 1500
     max_refine_points: int = 4000
-    pso_refine: bool = False
+    pso_refine: bool = True
+    pso_top: int = 4
     fallback: bool = True
     fallback_step: float = 2.0
     fallback_strictness: float = 1.5
@@ -112,21 +126,22 @@ class ConsensusConfig:
     def __post_init__(self):
         if not 0.0 < self.accept <= 1.0:
             raise InputError(f"accept is a verification score in (0, 1], got {self.accept}")
-        if not 0.0 <= self.max_conflict <= 1.0 or not 0.0 <= self.margin <= 1.0 or not 0.0 < self.rival <= 1.0:
+        if not (0.0 <= self.max_conflict <= 1.0 and 0.0 <= self.margin <= 1.0 and 0.0 < self.rival <= 1.0):
             raise InputError("max_conflict and margin are fractions in [0, 1], rival in (0, 1]")
-        for name in ("min_overlap_cells", "rotation_peaks", "translations", "refine_top",
-                     "scan_clusters", "max_poses", "max_refine_points"):
+        for name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters", "rotation_peaks",
+                     "translations", "refine_top", "max_poses", "max_refine_points", "pso_top"):
             v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < (0 if name in (
-                    "min_overlap_cells", "scan_clusters") else 1):
-                raise InputError(f"{name} must be a whole number >= 1, got {v!r}")
+            least = 0 if name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters") else 1
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
+                raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
         if not 0.0 <= self.min_overlap_fraction <= 1.0:
             raise InputError(f"min_overlap_fraction is a fraction in [0, 1], got {self.min_overlap_fraction}")
         if not (math.isfinite(self.fallback_strictness) and self.fallback_strictness >= 1):
             raise InputError(f"fallback_strictness must be >= 1, got {self.fallback_strictness}")
         if not (math.isfinite(self.min_agreement) and self.min_agreement >= 0):
             raise InputError(f"min_agreement must be >= 0 m, got {self.min_agreement}")
-        for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells", "fallback_step"):
+        for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells", "fallback_step",
+                     "cloud_shift"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a positive number, got {v!r}")
@@ -210,23 +225,27 @@ def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
 
 
 def _plausible(chk: Check, cfg: ConsensusConfig, resolution: float, walls: int,
-               strict: float = 1.0) -> bool:
+               strict: float = 1.0, cells: bool = True) -> bool:
     return (chk.score >= cfg.accept and chk.overlap >= strict * cfg.min_overlap_cells
             and chk.overlap >= cfg.min_overlap_fraction * walls
             and chk.quality() * resolution >= strict * cfg.min_agreement
+            and (not cells or chk.quality() >= strict * cfg.min_agreement_cells)
             and chk.conflict_fraction <= cfg.max_conflict)
 
 
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
                      evidence_a: EvidenceRaster, ia: int = 0, ib: int = 1, seed=0,
-                     exhaustive: bool = False) -> PairResult:
+                     exhaustive: bool = False, tree_a=None) -> PairResult:
     """Place map ``b`` in map ``a`` (both prepared), from every source of candidates.
 
     With ``exhaustive``, the translation search also runs at every ``fallback_step`` degrees
     of rotation (for maps whose walls have no dominant directions, such as caves), and three
     times as many candidates are refined. Testing more hypotheses gives chance fits more
     opportunities, so the overlap and agreement a placement needs are then
-    ``fallback_strictness`` times higher.
+    ``fallback_strictness`` times higher. When both maps come with recorded scans, the best
+    placement is finally refined on the scans' end points (``tree_a``: a ``cKDTree`` of
+    ``a.cloud``, built when not given); such a placement is not held to
+    ``min_agreement_cells``, which guards against the coarseness of grids.
     """
     strict = cfg.fallback_strictness if exhaustive else 1.0
     t0 = time.perf_counter()
@@ -246,13 +265,15 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         clusters = cluster_hypotheses(h, centre=centre, max_clusters=cfg.scan_clusters)
         starts += [(c.transform, "scans") for c in clusters]
         for c in clusters[:2]:
-            if all(abs(math.remainder(c.transform.theta - r, 2 * math.pi)) > math.radians(2) for r in rots):
+            if all(abs(math.remainder(c.transform.theta - r, 2 * math.pi)) > math.radians(2)
+                   for r in rots):
                 rots.append(c.transform.theta)
     wall: list[tuple[float, Transform2D]] = []
     head = set(rots[: 2 * cfg.rotation_peaks + 2])
     corr = Correlator(evidence_a, b.points)
     for th in rots:
-        wall += [(s, t) for t, s in corr.translations(th, count=cfg.translations if th in head else 2)]
+        count = cfg.translations if th in head else 2
+        wall += [(s, t) for t, s in corr.translations(th, count=count)]
     wall.sort(key=lambda st: -st[0])
     starts += [(t, "walls") for _, t in wall[: cfg.refine_top * (3 if exhaustive else 1)]]
 
@@ -271,19 +292,38 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                           seconds=seconds, hypotheses=n_hyp)
     best = refined[0]
     if cfg.pso_refine:
-        t = refine_pso(a.points, b.refine_points, best.transform, res, seed=seed)
-        t = refine_icp(a, b.refine_points, t, gates=(3.0, 2.0))
-        chk = verify(a, b, t)
-        if chk.quality() >= best.rank:
-            best = Candidate(t, chk, best.source)
-            refined[0] = best
+        # polish the best placement and every contender that could rival it alike, so that
+        # the rival test compares like with like
+        soft = make_field(a.points, res, sigma=1.0)
+        rng = np.random.default_rng(seed)
+        for k, c in enumerate(refined[:cfg.pso_top]):
+            if k and (c.rank < cfg.rival * best.rank or c.check.score < cfg.accept - cfg.margin):
+                continue
+            t = refine_pso(a.points, b.refine_points, c.transform, res, seed=rng, field=soft)
+            t = refine_icp(a, b.refine_points, t, gates=(3.0, 2.0))
+            chk = verify(a, b, t)
+            if chk.quality() > c.rank:
+                refined[k] = Candidate(t, chk, c.source)
+        refined.sort(key=lambda c: -c.rank)
+        best = refined[0]
+    scan_refined = False
+    if cfg.use_scans and len(a.cloud) and len(b.cloud):
+        # recorded scans do not quantise walls to cells: pin the best placement down on them
+        tree = tree_a if tree_a is not None else cKDTree(a.cloud)
+        t = refine_cloud(a.cloud, tree, b.cloud, best.transform)
+        if displacement(t, best.transform, box) <= cfg.cloud_shift * res:
+            chk = verify(a, b, t)
+            if chk.quality() >= 0.9 * best.rank:
+                best = Candidate(t, chk, best.source)
+                refined[0] = best
+                scan_refined = True
     walls = min(len(a.points), len(b.points))
     plausible = []
     for c in refined:
-        if _plausible(c.check, cfg, res, walls, strict) and all(displacement(c.transform, p.transform, box)
-                                            > cfg.distinct_cells * res for p in plausible):
+        if _plausible(c.check, cfg, res, walls, strict) and all(
+                displacement(c.transform, p.transform, box) > cfg.distinct_cells * res for p in plausible):
             plausible.append(c)
-    ok = _plausible(best.check, cfg, res, walls, strict)
+    ok = _plausible(best.check, cfg, res, walls, strict, cells=not scan_refined)
     # a rival need not pass every threshold itself: fitting nearly as well elsewhere is enough
     # to make the best placement unsure
     rivals = []
@@ -307,9 +347,11 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     elif chk.overlap < max(strict * cfg.min_overlap_cells, cfg.min_overlap_fraction * walls):
         reason = (f"best placement overlaps only {chk.overlap} wall cells (needs "
                   f"{math.ceil(max(strict * cfg.min_overlap_cells, cfg.min_overlap_fraction * walls))})")
-    elif chk.quality() * res < strict * cfg.min_agreement:
-        reason = (f"best placement agrees on too few walls ({chk.quality() * res:.1f} m net of "
-                  f"misfits, needs {strict * cfg.min_agreement:g} m)")
+    elif (chk.quality() * res < strict * cfg.min_agreement
+          or (not scan_refined and chk.quality() < strict * cfg.min_agreement_cells)):
+        reason = (f"best placement agrees on too few walls ({chk.quality() * res:.1f} m, "
+                  f"{chk.quality():.0f} cells net of misfits; needs {strict * cfg.min_agreement:g} m "
+                  f"and {strict * cfg.min_agreement_cells:.0f} cells)")
     elif chk.score < cfg.accept:
         reason = (f"best placement agrees on {100 * chk.score:.0f}% of the overlapping walls "
                   f"(needs {100 * cfg.accept:.0f}%)")

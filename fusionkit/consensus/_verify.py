@@ -31,8 +31,8 @@ from ..pso import PSOConfig, pso_minimize
 from ..transform import Transform2D
 from ._index import MapIndex
 
-__all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_pso", "Check", "verify",
-           "DEFAULT_GATES"]
+__all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_cloud", "refine_pso", "Check",
+           "verify", "DEFAULT_GATES"]
 
 #: Pairing distances (cells) of the ICP stages, each run until the motion settles.
 DEFAULT_GATES = (8.0, 5.0, 3.0, 2.0)
@@ -164,7 +164,8 @@ def refine_icp_numpy(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
         for _ in range(iterations):
             ri, ci, inside = a.cells(t(points_b))
             ok = np.zeros(len(points_b), bool)
-            ok[inside] = (a.dist[ri[inside], ci[inside]] <= gate) & a.usable[ri[inside], ci[inside]].astype(bool)
+            rin, cin = ri[inside], ci[inside]
+            ok[inside] = (a.dist[rin, cin] <= gate) & a.usable[rin, cin].astype(bool)
             if ok.sum() < 10:
                 return t
             dst = a.grid.cell_to_world(a.nearest[0, ri[ok], ci[ok]], a.nearest[1, ri[ok], ci[ok]])
@@ -172,6 +173,36 @@ def refine_icp_numpy(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
             dt, dr = new.error_to(t)
             t = new
             if dt < 0.05 * res and dr < 1e-4:
+                break
+    return t
+
+
+def refine_cloud(cloud_a: np.ndarray, tree_a, cloud_b: np.ndarray, start: Transform2D, *,
+                 gates=(0.4, 0.2, 0.1), iterations: int = 8, max_points: int = 2000) -> Transform2D:
+    """Iterative closest points between two robots' raw scan end points (m), from ``start``
+    (B -> A).
+
+    The grids quantise walls to cells; the recorded scans do not, so on coarse grids this pins
+    a placement down more finely. ``tree_a`` is a :class:`scipy.spatial.cKDTree` of
+    ``cloud_a``; pairs farther apart than the current gate (m) are left out (trimmed ICP).
+    """
+    if len(cloud_a) < 10 or len(cloud_b) < 10:
+        return start
+    pts = cloud_b
+    if len(pts) > max_points:
+        pts = pts[np.linspace(0, len(pts) - 1, max_points).astype(np.int64)]
+    t = start
+    for gate in gates:
+        for _ in range(iterations):
+            q = t(pts)
+            d, j = tree_a.query(q, distance_upper_bound=gate)
+            ok = np.isfinite(d)
+            if ok.sum() < 30:
+                return t
+            new = rigid_fit(pts[ok], cloud_a[j[ok]])
+            dt, dr = new.error_to(t)
+            t = new
+            if dt < 1e-3 and dr < 1e-5:
                 break
     return t
 
