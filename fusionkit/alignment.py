@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import ndimage
 
-from ._jit import njit, pjit, prange
+from ._jit import pjit, prange
 from .errors import InputError
 from .grid import OccupancyGrid
 from .pso import PSOConfig, PSOResult, pso_minimize

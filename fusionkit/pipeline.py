@@ -15,7 +15,6 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass, field, replace
-from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -31,7 +30,7 @@ from .pso import PSOConfig, PSOState
 from .resample import canvas_for, resample
 from .scanlog import ScanLog, load_scans, scans_path_for
 from .transform import Transform2D
-from .unique_poses import UniquePoses, find_unique_poses
+from .unique_poses import find_unique_poses
 
 __all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MergeStep", "MergeResult", "MergeCancelled",
            "merge", "METHODS", "load_inputs"]

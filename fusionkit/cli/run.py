@@ -7,7 +7,6 @@ import time
 from pathlib import Path
 
 from .._atomic import write_text_atomic
-from ..errors import InputError
 from ._common import Progress, add_merge_options, int_range, merge_config_from_args
 
 
@@ -32,7 +31,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..mapio import load_map, save_map
-    from ..metrics import PAPER_TABLE1, format_table1, table1, transform_errors
+    from ..metrics import format_table1, table1, transform_errors
     from ..pipeline import merge
     from ..simulate import SimulationConfig, simulate, write_run
     from ..worlds import default_world
