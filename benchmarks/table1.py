@@ -36,7 +36,7 @@ def run_case(world, robots, poses, sim_seed, merge_seed=0):
     sim = simulate(world, SimulationConfig(robots=robots, poses=poses, seed=sim_seed))
     grids, scans = [r.grid for r in sim.robots], [r.scans for r in sim.robots]
     t0 = time.perf_counter()
-    res = merge(grids, scans=scans, config=MergeConfig(seed=merge_seed))
+    res = merge(grids, scans=scans, config=MergeConfig(method="spectral-pso", seed=merge_seed))
     seconds = time.perf_counter() - t0
     ref = sim.robots[0].transform
     truth = [ref.inverse @ r.transform for r in sim.robots]
@@ -65,7 +65,7 @@ def main(argv=None) -> int:
     warm = []
     for _ in range(3):
         t0 = time.perf_counter()
-        again = merge(grids, scans=scans, config=MergeConfig(seed=0))
+        again = merge(grids, scans=scans, config=MergeConfig(method="spectral-pso", seed=0))
         warm.append(time.perf_counter() - t0)
     print(f"merge of {args.robots} maps (simulation excluded): first call in this process "
           f"{seconds:.2f} s, then {', '.join(f'{t:.2f}' for t in warm)} s; stages of the last: "

@@ -16,7 +16,9 @@ The *overlap* of two maps is the share of the smaller one's known cells (in the 
 other also knows. Cases are drawn so that every map overlaps another one by at least
 ``min_overlap`` and all are linked to the reference (the first map) by such overlaps; when a
 simulation cannot give that in a few tries, the maps left unlinked are scored apart (refusing
-them is right).
+them is right). A map with fewer than ``MIN_MAP_WALLS`` occupied cells (a robot that saw no wall
+in range, as on an open campus) holds nothing to place it by: it links nothing and is scored
+apart too.
 
 Scoring
 -------
@@ -67,6 +69,8 @@ DEFAULT_METHODS = ("consensus", "spectral-pso", "map-merge", "map-merge-shipped"
 OVERLAP_BINS = (0.0, 0.15, 0.3, 0.5)
 #: Fewest occupied cells for a map to be used as a world.
 MIN_WORLD_OCCUPIED = 1000
+#: Fewest occupied cells for a case's map to count as placeable (linked).
+MIN_MAP_WALLS = 20
 
 
 @dataclass(frozen=True)
@@ -268,7 +272,8 @@ class Case:
     overlap : (K, K) ndarray
         Overlap of every two maps (1 on the diagonal).
     linked : tuple of bool
-        Per map, whether overlaps of at least ``min_overlap`` link it to the reference.
+        Per map, whether overlaps of at least ``min_overlap`` between maps that hold walls
+        link it to the reference.
     """
 
     spec: CaseSpec
@@ -303,14 +308,16 @@ def _overlaps(masks: list) -> np.ndarray:
     return ov
 
 
-def _linked(ov: np.ndarray, min_overlap: float, reference: int = 0) -> tuple:
+def _linked(ov: np.ndarray, min_overlap: float, grids=None, reference: int = 0) -> tuple:
     k = ov.shape[0]
-    seen = {reference}
-    stack = [reference]
+    walls = [True] * k if grids is None else [int(g.occupied_mask().sum()) >= MIN_MAP_WALLS
+                                               for g in grids]
+    seen = {reference} if walls[reference] else set()
+    stack = list(seen)
     while stack:
         i = stack.pop()
         for j in range(k):
-            if j not in seen and ov[i, j] >= min_overlap:
+            if j not in seen and walls[j] and ov[i, j] >= min_overlap:
                 seen.add(j)
                 stack.append(j)
     return tuple(i in seen for i in range(k))
@@ -406,7 +413,7 @@ def _crop_case(spec: CaseSpec, world: OccupancyGrid, config: BenchConfig) -> Cas
         truth.append(own_to_world)
     ov = _overlaps(masks)
     return Case(spec, world, tuple(grids), tuple([None] * k), tuple(truth), ov,
-                _linked(ov, config.min_overlap))
+                _linked(ov, config.min_overlap, grids))
 
 
 def _explore_case(spec: CaseSpec, world: OccupancyGrid, config: BenchConfig) -> Case:
@@ -420,7 +427,7 @@ def _explore_case(spec: CaseSpec, world: OccupancyGrid, config: BenchConfig) -> 
         masks = [resample(r.grid, r.transform, world).known_mask() & world.known_mask()
                  for r in sim.robots]
         ov = _overlaps(masks)
-        linked = _linked(ov, config.min_overlap)
+        linked = _linked(ov, config.min_overlap, [r.grid for r in sim.robots])
         if best is None or sum(linked) > sum(best[2]):
             best = (sim, ov, linked)
         if all(linked):
@@ -456,6 +463,7 @@ def run_case(spec: CaseSpec, config: BenchConfig, keep_grids: bool = False) -> d
     ``keep_grids``, the fused grids for pictures)."""
     from .fusion import fuse_maps
     from .metrics import evaluate_map
+    from .consensus import ConsensusConfig
     from .pipeline import MergeConfig, merge
 
     t0 = time.perf_counter()
@@ -479,8 +487,10 @@ def run_case(spec: CaseSpec, config: BenchConfig, keep_grids: bool = False) -> d
         rec = {"maps": [], "error": ""}
         try:
             t1 = time.perf_counter()
+            consensus = ConsensusConfig(threads=1) if _ONE_THREAD else None
             result = merge(list(case.grids), scans=scans,
-                           config=MergeConfig(method=method, seed=spec.seed % 10_000))
+                           config=MergeConfig(method=method, seed=spec.seed % 10_000,
+                                              consensus=consensus))
             seconds = time.perf_counter() - t1
             transforms = result.transforms
             fused = result.grid
@@ -517,12 +527,18 @@ def run_case(spec: CaseSpec, config: BenchConfig, keep_grids: bool = False) -> d
     return out
 
 
+#: Set in the worker processes of a parallel run: every method then runs on one thread (the
+#: workers share the cores), so that timings compare like with like.
+_ONE_THREAD = False
+
+
 def _worker_init():
-    try:
-        import numba
-        numba.set_num_threads(1)
-    except Exception:       # pragma: no cover - numba always present
-        pass
+    global _ONE_THREAD
+    _ONE_THREAD = True
+    import cv2
+    import numba
+    numba.set_num_threads(1)
+    cv2.setNumThreads(1)
 
 
 def _run_one(args):
@@ -728,7 +744,8 @@ def format_markdown(result: BenchResult, summary: dict | None = None) -> str:
         lines.append("")
     unl = {m: (t["unlinked"], t["unlinked_refused"]) for m, t in s["methods"].items()}
     if any(u for u, _ in unl.values()):
-        lines += ["Maps that no overlap >= the minimum links to the reference (right answer: refuse): "
+        lines += ["Maps that no overlap >= the minimum links to the reference, or that hold no walls "
+                  "(right answer: refuse): "
                   + ", ".join(f"{m} refused {r} of {u}" for m, (u, r) in unl.items()) + ".", ""]
     errs = {m: t["errors"] for m, t in s["methods"].items() if t["errors"]}
     if errs:

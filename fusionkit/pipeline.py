@@ -53,12 +53,13 @@ class MergeConfig:
     Attributes
     ----------
     method : str
-        ``"spectral-pso"`` (default): the paper's method; ``"consensus"``: verified hypotheses
-        from scans and walls, kept consistent over all maps, refused when unsure
-        (:mod:`fusionkit.consensus`; ahead of the paper's method and the peers in
-        ``fusionkit bench``, see BENCHMARKS.md); ``"map-merge"``,
-        ``"map-merge-shipped"``, ``"hough-spectrum"``, ``"fourier-mellin"``: the classic peers
-        (:mod:`fusionkit.baselines`). The settings below are the paper's method's unless noted.
+        ``"consensus"`` (default): verified hypotheses from scans and walls, kept consistent
+        over all maps, refused when unsure (:mod:`fusionkit.consensus`; ahead of the paper's
+        method and the peers in ``fusionkit bench``, see BENCHMARKS.md); ``"spectral-pso"``:
+        the paper's method (unique poses, Pearson pairing, PSO; what ``fusionkit run`` and the
+        notebooks reproduce); ``"map-merge"``, ``"map-merge-shipped"``, ``"hough-spectrum"``,
+        ``"fourier-mellin"``: the classic peers (:mod:`fusionkit.baselines`). The settings
+        below are the paper's method's unless noted.
     sub_sec : int
         Half-width of Algorithm 1's sections (poses).
     delta : float or None
@@ -86,7 +87,7 @@ class MergeConfig:
         Settings of the ``"consensus"`` method (None: its defaults).
     """
 
-    method: str = "spectral-pso"
+    method: str = "consensus"
     sub_sec: int = 5
     delta: float | None = None
     unique_count: int = 200

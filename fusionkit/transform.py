@@ -40,12 +40,14 @@ class Transform2D:
     theta: float = 0.0
 
     def __post_init__(self):
-        for name in ("x", "y", "theta"):
-            v = float(getattr(self, name))
+        # plain floats and math: transforms are made in inner loops
+        x, y, theta = float(self.x), float(self.y), float(self.theta)
+        for name, v in (("x", x), ("y", y), ("theta", theta)):
             if not math.isfinite(v):
                 raise ValueError(f"transform {name} must be finite, got {v}")
-            object.__setattr__(self, name, v)
-        object.__setattr__(self, "theta", float(wrap_angle(self.theta)))
+        object.__setattr__(self, "x", x)
+        object.__setattr__(self, "y", y)
+        object.__setattr__(self, "theta", (theta + math.pi) % (2.0 * math.pi) - math.pi)
 
     # -- constructors -------------------------------------------------------------------------
     @classmethod

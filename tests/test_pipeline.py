@@ -38,7 +38,7 @@ def _true_relative(sim, k, ref=0):
 
 def test_merge_places_every_robot_within_2_deg_and_3_cells(sim):
     res = merge([r.grid for r in sim.robots], scans=[r.scans for r in sim.robots],
-                config=MergeConfig(seed=1))
+                config=MergeConfig(method="spectral-pso", seed=1))
     assert res.all_merged
     for p in res.placements:
         dt, dr = p.transform.error_to(_true_relative(sim, p.index))
@@ -56,8 +56,8 @@ def test_merge_places_every_robot_within_2_deg_and_3_cells(sim):
 
 def test_merge_is_deterministic_for_a_seed(sim):
     grids, scans = [r.grid for r in sim.robots[:2]], [r.scans for r in sim.robots[:2]]
-    a = merge(grids, scans=scans, config=MergeConfig(seed=5))
-    b = merge(grids, scans=scans, config=MergeConfig(seed=5))
+    a = merge(grids, scans=scans, config=MergeConfig(method="spectral-pso", seed=5))
+    b = merge(grids, scans=scans, config=MergeConfig(method="spectral-pso", seed=5))
     assert a.placements[1].transform == b.placements[1].transform
     np.testing.assert_array_equal(a.grid.data, b.grid.data)
 
@@ -72,7 +72,7 @@ def test_callback_sees_each_pso_iteration_and_can_cancel(sim):
         return ev.stage == "align" and ev.pso is not None and ev.pso.iteration >= 3
 
     with pytest.raises(MergeCancelled):
-        merge(grids, scans=scans, callback=cb)
+        merge(grids, scans=scans, config=MergeConfig(method="spectral-pso"), callback=cb)
     stages = [e.stage for e in seen]
     assert stages.index("unique_poses") < stages.index("pairing") < stages.index("align")
     assert seen[-1].pso.iteration == 3
@@ -94,7 +94,8 @@ def test_merge_refuses_a_single_map_and_mismatched_scans(sim):
         merge([g, g], scans=[sim.robots[0].scans])
     short = sim.robots[1].scans.subset(slice(0, 8))
     with pytest.raises(InputError, match="sub_sec"):
-        merge([g, sim.robots[1].grid], scans=[sim.robots[0].scans, short])
+        merge([g, sim.robots[1].grid], scans=[sim.robots[0].scans, short],
+              config=MergeConfig(method="spectral-pso"))
 
 
 def test_cli_merge_writes_the_contract_report_and_evaluate_agrees(run_dir, sim, capsys):
@@ -104,7 +105,7 @@ def test_cli_merge_writes_the_contract_report_and_evaluate_agrees(run_dir, sim, 
     code = main(["merge", *inputs, "-o", str(out), "--report", str(report), "--seed", "2"])
     assert code == 0
     rep = json.loads(report.read_text())
-    assert rep["method"] == "spectral-pso" and rep["reference"] == inputs[0]
+    assert rep["method"] == "consensus" and rep["reference"] == inputs[0]     # the default
     assert rep["output"] == str(out)
     assert [m["input"] for m in rep["maps"]] == inputs
     assert rep["maps"][0]["transform"] == {"x": 0.0, "y": 0.0, "theta": 0.0}
@@ -169,7 +170,7 @@ def test_cli_merge_bad_inputs_give_one_line_and_write_nothing(tmp_path, run_dir,
 
 def test_maps_without_scans_merge_by_virtual_scans(sim):
     grids = [r.grid for r in sim.robots[:2]]
-    res = merge(grids, config=MergeConfig(seed=3))
+    res = merge(grids, config=MergeConfig(method="spectral-pso", seed=3))
     assert res.virtual == (True, True)
     p = res.placements[1]
     assert p.merged
@@ -182,7 +183,7 @@ def test_a_map_of_another_resolution_is_resampled_to_the_reference(sim):
     b = sim.robots[1].grid
     fine = resample(b, Transform2D.identity(), canvas_for([b], [Transform2D.identity()], 0.05))
     res = merge([sim.robots[0].grid, fine], scans=[sim.robots[0].scans, sim.robots[1].scans],
-                config=MergeConfig(seed=2))
+                config=MergeConfig(method="spectral-pso", seed=2))
     assert res.grid.resolution == sim.robots[0].grid.resolution
     p = res.placements[1]
     assert p.merged

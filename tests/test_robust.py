@@ -15,7 +15,9 @@ from fusionkit.consensus import (Check, ConsensusConfig, PairResult, estimate_ma
 from fusionkit.consensus._graph import solve_graph
 from fusionkit.consensus._hypotheses import Hypotheses, cluster_hypotheses
 from fusionkit.consensus._pair import Candidate
-from fusionkit.consensus._verify import refine_cloud, refine_icp, refine_icp_numpy, rigid_fit
+from fusionkit.consensus._pair import displacement
+from fusionkit.consensus._verify import (_one_way, _one_way_numpy, refine_cloud, refine_icp,
+                                       refine_icp_numpy, rigid_fit)
 from fusionkit.errors import InputError
 from fusionkit.grid import OccupancyGrid
 from fusionkit.mapio import load_map
@@ -73,6 +75,26 @@ def test_verification_prefers_the_true_placement(crop):
     assert right.score > 0.97 and right.conflicts <= 2
     assert right.quality() > wrong.quality() and right.quality() > turned.quality()
     assert wrong.score < 0.8 and turned.score < 0.8
+
+
+def test_verification_counts_match_the_numpy_reference(crop):
+    a, b = prepare_maps([crop.a, crop.b])
+    rng = np.random.default_rng(11)
+    for _ in range(20):
+        t = Transform2D(crop.truth.x + rng.normal(0, 1.0), crop.truth.y + rng.normal(0, 1.0),
+                        crop.truth.theta + rng.normal(0, 0.3))
+        assert _one_way(a, b.points, t) == _one_way_numpy(a, b.points, t)
+        assert _one_way(b, a.points, t.inverse) == _one_way_numpy(b, a.points, t.inverse)
+
+
+def test_displacement_is_the_largest_move_of_the_points():
+    rng = np.random.default_rng(2)
+    pts = rng.normal(0, 5.0, (4, 2))
+    for _ in range(10):
+        t1 = Transform2D(*rng.normal(0, 2.0, 2), rng.uniform(-3, 3))
+        t2 = Transform2D(*rng.normal(0, 2.0, 2), rng.uniform(-3, 3))
+        want = np.sqrt(((t1(pts) - t2(pts)) ** 2).sum(axis=1)).max()
+        assert displacement(t1, t2, pts) == pytest.approx(want, rel=1e-9, abs=1e-12)
 
 
 def test_scan_cloud_refinement_recovers_a_motion_beyond_the_grid():
@@ -231,6 +253,65 @@ def test_a_lone_fit_of_a_map_with_repeated_structure_needs_a_loop():
     g = solve_graph(pairs, _fake_indexes(3), 0, ConsensusConfig(final_check=False), _boxes(3))
     assert g.transforms[2] is not None
     assert g.transforms[2].error_to(t01 @ opts[1].transform)[0] < 1e-6
+
+
+def test_a_witness_decides_which_of_two_clashing_pairs_is_wrong():
+    # maps 1, 2, 3 agree among themselves; map 0's fits with 2 and 3 clash, and the wrong one
+    # (0, 3) carries more evidence; the fit (0, 1) has too small an overlap to be accepted, but
+    # as a witness it closes a loop with (0, 2), not with (0, 3)
+    t01 = Transform2D(1.0, 0.0, 0.3)
+    t12 = Transform2D(0.0, 2.0, -0.5)
+    t23 = Transform2D(-1.0, 1.0, 0.2)
+    t02, t13 = t01 @ t12, t12 @ t23
+    wrong = Transform2D(t02.x + 3.0, t02.y, t02.theta) @ t23
+    weak = Check(0.99, 0.99, 0.99, 500, 1000, 10, 0, 0.0)
+    strong = Check(0.99, 0.99, 0.99, 900, 1800, 10, 0, 0.0)
+    pairs = {(0, 1): _pair(0, 1, t01, ok=False), (1, 2): _pair(1, 2, t12), (2, 3): _pair(2, 3, t23),
+             (1, 3): _pair(1, 3, t13), (0, 2): _pair(0, 2, t02),
+             (0, 3): _pair(0, 3, wrong)}
+    pairs[(0, 3)] = PairResult(0, 3, wrong, 0.99, True, False, (Candidate(wrong, strong, "walls"),),
+                               Candidate(wrong, strong, "walls"))
+    pairs[(0, 2)] = PairResult(0, 2, t02, 0.99, True, False, (Candidate(t02, weak, "walls"),),
+                               Candidate(t02, weak, "walls"))
+    g = solve_graph(pairs, _fake_indexes(4), 0, ConsensusConfig(final_check=False), _boxes(4))
+    assert (0, 3) in g.dropped and (0, 1) not in [e for e in g.tree]
+    for k, truth in ((1, t01), (2, t02), (3, t02 @ t23)):
+        assert g.transforms[k].error_to(truth)[0] < 1e-6, k
+
+
+def test_a_map_without_walls_is_left_out_with_a_reason(crop):
+    empty = OccupancyGrid(np.where(crop.b.data == 100, 0, crop.b.data).astype(crop.b.data.dtype),
+                          crop.b.resolution, crop.b.origin)
+    assert not empty.occupied_mask().any()
+    result = merge([crop.a, empty], config=MergeConfig(method="consensus"))
+    assert not result.placements[1].merged
+    assert "wall" in result.placements[1].reason
+
+
+def test_threads_do_not_change_the_result(five_robots):
+    grids = [r.grid for r in five_robots.robots]
+    scans = [r.scans for r in five_robots.robots]
+    one = estimate_maps(grids, scans, config=ConsensusConfig(threads=1))
+    two = estimate_maps(grids, scans, config=ConsensusConfig(threads=2))
+    for a, b in zip(one.transforms, two.transforms):
+        assert (a is None) == (b is None)
+        if a is not None:
+            assert a.x == b.x and a.y == b.y and a.theta == b.theta
+
+
+def test_repeated_racks_make_a_pair_ambiguous_not_wrong():
+    # two windows of the warehouse whose overlap is all racks: shifted by a rack's pitch, one
+    # still fits the other perfectly, with more wall in common than in the true placement
+    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
+    spec = CaseSpec(0, WorldSpec("warehouse", builtin="warehouse"), "crop", 2, 180735306)
+    case = make_case(spec, BenchConfig())
+    truth = case.truth[0].inverse @ case.truth[1]
+    assert verify(*prepare_maps(case.grids), truth).score > 0.99       # the truth fits too
+    est = estimate_pair(case.grids[0], case.grids[1])
+    pair = est.diagnostics["pair"]
+    assert not est.accepted and pair.ambiguous and len(pair.plausible) >= 2
+    result = merge(list(case.grids), config=MergeConfig(method="consensus"))
+    assert not result.placements[1].merged and "ambiguous" in result.placements[1].reason
 
 
 def _fake_indexes(n):

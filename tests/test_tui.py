@@ -181,7 +181,7 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root):
         await run_merge(pilot, {"iterations": "30", "particles": "30", "seed": "4"})
         result = screen.result
         assert result is not None
-        assert result.config == MergeConfig(seed=4).with_pso(iterations=30, particles=30)
+        assert result.config == MergeConfig(method="spectral-pso", seed=4).with_pso(iterations=30, particles=30)
         assert app.main.query_one("TabbedContent").active == "result"
 
         # the live plot got every PSO iteration of every alignment
@@ -289,6 +289,22 @@ async def test_cancel_stops_the_merge_and_the_app_stays_usable(in_root):
         # still usable: the next run completes
         await run_merge(pilot, {"particles": "40", **FAST})
         assert screen.result is not None
+        assert screen.query_one("#placements", DataTable).row_count == ROBOTS
+
+
+async def test_the_consensus_method_runs_from_the_settings(in_root):
+    from textual.widgets import Select
+    app = make_app(["run"])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        assert screen.query_one("#method", Select).value == "spectral-pso"   # its swarm is shown
+        screen.query_one("#method", Select).value = "consensus"
+        await pilot.pause()
+        await run_merge(pilot, {})
+        result = screen.result
+        assert result is not None and result.config.method == "consensus"
+        assert result.all_merged
         assert screen.query_one("#placements", DataTable).row_count == ROBOTS
 
 

@@ -69,16 +69,18 @@ def float_range(lo: float, hi: float, *, lo_open: bool = False):
     return parse
 
 
-def add_merge_options(p) -> None:
-    """The method's settings, shared by ``merge``, ``run`` and ``bench``."""
+def add_merge_options(p, method: str | None = None) -> None:
+    """The method's settings, shared by ``merge`` and ``run`` (``method``: the command's default
+    method, if not the library's)."""
     from ..pipeline import METHODS, MergeConfig
     d = MergeConfig()
+    method = method or d.method
     g = p.add_argument_group("method settings")
-    g.add_argument("--method", choices=METHODS, default=d.method,
-                   help=f"merging method (default {d.method}). spectral-pso: the paper's DFT + "
-                        f"Pearson + PSO (the settings below are its own); consensus: hypotheses "
-                        f"from scans and walls, each verified on the whole maps, kept consistent "
-                        f"over all maps, refused when unsure; map-merge, map-merge-shipped, "
+    g.add_argument("--method", choices=METHODS, default=method,
+                   help=f"merging method (default {method}). consensus: hypotheses from scans "
+                        f"and walls, each verified on the whole maps, kept consistent over all "
+                        f"maps, refused when unsure; spectral-pso: the paper's DFT + Pearson + PSO "
+                        f"(the settings below are its own); map-merge, map-merge-shipped, "
                         f"hough-spectrum, fourier-mellin: the classic peers")
     g.add_argument("--seed", type=int, default=d.seed, help=f"seed of every random step (default {d.seed})")
     g.add_argument("--theta", type=float_range(-1, 1), default=d.theta,

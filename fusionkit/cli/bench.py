@@ -25,7 +25,7 @@ def register(sub) -> None:
                     "below --max-rotation and its centroid within --max-cells of the truth, a wrong "
                     "merge when merged outside those bounds, a refusal when not merged. Prints the "
                     "table and writes OUT/bench.md, OUT/bench.json and OUT/bench_METHOD.png (one "
-                    "case per method). Results do not depend on --jobs.")
+                    "case per method). Results do not depend on --jobs; timings do.")
     p.add_argument("folders", nargs="*", metavar="DIR",
                    help="folders of ground-truth maps (*.yaml); default: maps and maps/real, plus "
                         "the built-in worlds not already found there")
@@ -33,8 +33,9 @@ def register(sub) -> None:
                    help=f"built-in worlds to add ({', '.join(WORLDS)}); default: all of them when no "
                         f"folder is given, none otherwise")
     p.add_argument("--methods", nargs="+", choices=METHODS, default=list(DEFAULT_METHODS), metavar="M",
-                   help=f"methods to compare (default: {' '.join(DEFAULT_METHODS)}; also "
-                        f"{' '.join(m for m in METHODS if m not in DEFAULT_METHODS)})")
+                   help=f"methods to compare (default: {' '.join(DEFAULT_METHODS)}"
+                        + ("".join(f"; also {m}" for m in METHODS if m not in DEFAULT_METHODS))
+                        + ")")
     p.add_argument("--modes", nargs="+", choices=MODES, default=list(d.modes),
                    help=f"kinds of case (default: {' '.join(d.modes)})")
     p.add_argument("--cases", type=int_range(1, 100000), default=d.cases,
@@ -69,7 +70,9 @@ def register(sub) -> None:
                    help=f"success bound on the centroid displacement, cells (default {d.max_cells})")
     p.add_argument("--seed", type=int, default=d.seed, help=f"seed of the suite (default {d.seed})")
     p.add_argument("--jobs", type=int_range(1, 64), default=1,
-                   help="cases run in this many processes at once (default 1)")
+                   help="cases run in this many processes at once (default 1); with more than "
+                        "one, every method runs on one thread (with one, a method may use every "
+                        "core, as OpenCV does for map-merge)")
     p.add_argument("--out", default="bench", metavar="DIR",
                    help="output folder, created if missing (default: bench)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")

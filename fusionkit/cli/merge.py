@@ -87,5 +87,6 @@ def format_placements(result, names) -> str:
                          f"{math.degrees(t.theta):11.1f}")
     order = " , ".join(f"{names[a]} + {names[b]}" for a, b in result.fusion_order) or "(none)"
     lines.append(f"fusion order: {order}")
-    lines.append("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items()))
+    lines.append(f"method: {result.config.method}; time: "
+                 + ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items()))
     return "\n".join(lines)

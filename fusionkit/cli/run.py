@@ -17,7 +17,9 @@ def register(sub) -> None:
                     "(default: the office, 5 robots x 5000 poses), write their maps, merge them "
                     "and print the paper's Table 1 (completeness, accuracy, precision, "
                     "efficiency of M1, M1,2, ...) beside the paper's own numbers and the oracle "
-                    "(fusion with the true transforms).")
+                    "(fusion with the true transforms). It merges with the paper's method "
+                    "(spectral-pso) unless --method says otherwise; fusionkit merge defaults "
+                    "to consensus.")
     p.add_argument("--out", default="runs/default", metavar="DIR",
                    help="run directory: robot maps, truth.json, merged.yaml, report (default runs/default)")
     p.add_argument("--world", metavar="W.yaml", help="world map (default: the built-in office)")
@@ -25,7 +27,7 @@ def register(sub) -> None:
     p.add_argument("--poses", type=int_range(10, 1_000_000), default=5000,
                    help="poses per robot (default 5000)")
     p.add_argument("--sim-seed", type=int, default=7, help="seed of the simulation (default 7)")
-    add_merge_options(p)
+    add_merge_options(p, method="spectral-pso")
     p.set_defaults(func=run)
 
 

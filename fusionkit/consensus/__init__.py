@@ -23,8 +23,12 @@ spanning tree by confidence and every two placed maps are cross-checked (:mod:`.
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import itertools
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
@@ -73,8 +77,6 @@ def prepare_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None]
 
 
 def _pair(indexes, hists, evidence, trees, cfg, i, j, seed, exhaustive=False) -> PairResult:
-    if len(indexes[i].cloud) and i not in trees:
-        trees[i] = cKDTree(indexes[i].cloud)
     return estimate_indexed(indexes[i], indexes[j], cfg, hist_a=hists[i], hist_b=hists[j],
                             evidence_a=evidence[i], ia=i, ib=j, seed=seed, exhaustive=exhaustive,
                             tree_a=trees.get(i))
@@ -98,7 +100,7 @@ def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None
     ia, ib = prepare_maps([a, b], [scans_a, scans_b], config=config, seed=seed)
     pr = estimate_indexed(ia, ib, config, hist_a=orientation_histogram(ia),
                           hist_b=orientation_histogram(ib),
-                          evidence_a=evidence_raster(ia, coarse=config.coarse), seed=seed)
+                          evidence_a=evidence_raster(ia, coarse=config.coarse, max_side=config.coarse_side), seed=seed)
     return PairEstimate(pr.transform, pr.confidence, pr.accepted,
                         tuple((c.transform, c.check.score) for c in pr.plausible) or
                         (((pr.transform, pr.confidence),) if pr.transform is not None else ()),
@@ -138,8 +140,11 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
     seed : int
         Seed of the random steps (virtual scans, the optional swarm polish).
     callback : callable(stage, step, total, pair), optional
-        Called before each map is prepared (``"scans"``) and each pair is estimated
-        (``"align"``, with ``pair = (i, j)``).
+        Called, in the calling thread, as each map is prepared (``"scans"``) and each pair is
+        estimated (``"align"``, with ``pair = (i, j)``).
+
+    Maps are prepared and pairs estimated on ``config.threads`` threads (the kernels release
+    the interpreter); the result does not depend on their number.
     """
     grids = list(grids)
     n = len(grids)
@@ -150,40 +155,61 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
     seconds = {}
     t0 = time.perf_counter()
     scans = list(scans) if scans is not None else [None] * n
-    indexes = []
-    for k in range(n):
-        if callback is not None:
-            callback("scans", k, n, None)
-        indexes += prepare_maps([grids[k]], [scans[k]], config=config, seed=seed + k,
-                                virtual_poses=virtual_poses)
-    if len({round(i.resolution, 12) for i in indexes}) > 1:
-        raise InputError("the maps have different resolutions; resample them to one first")
-    hists = [orientation_histogram(ix) for ix in indexes]
-    evidence = [evidence_raster(ix, coarse=config.coarse) for ix in indexes]
-    seconds["prepare"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    pairs = {}
-    trees: dict = {}
-    todo = list(itertools.combinations(range(n), 2))
-    for s, (i, j) in enumerate(todo):
-        if callback is not None:
-            callback("align", s, len(todo), (i, j))
-        pairs[(i, j)] = _pair(indexes, hists, evidence, trees, config, i, j, seed)
-    seconds["pairs"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    boxes = [corners(ix) for ix in indexes]
-    graph = solve_graph(pairs, indexes, reference, config, boxes)
-    seconds["graph"] = time.perf_counter() - t0
-    left = [k for k in range(n) if graph.transforms[k] is None]
-    if config.fallback and left:
-        # a map left out: search its undecided pairs again, exhaustively
+    workers = config.threads or os.cpu_count() or 1
+    workers = max(1, min(workers, max(n, n * (n - 1) // 2)))
+    with ThreadPoolExecutor(max_workers=workers) if workers > 1 else contextlib.nullcontext() as pool:
+
+        def run(jobs, stage, label):
+            # results are gathered in a fixed order, so they do not depend on the threads
+            if pool is None:
+                out = []
+                for step, fn in enumerate(jobs):
+                    if callback is not None:
+                        callback(stage, step, len(jobs), label(step))
+                    out.append(fn())
+                return out
+            futures = [pool.submit(fn) for fn in jobs]
+            for step, fut in enumerate(futures):
+                if callback is not None:
+                    callback(stage, step, len(futures), label(step))
+                fut.result()
+            return [f.result() for f in futures]
+
+        def prepare(k):
+            ix = prepare_maps([grids[k]], [scans[k]], config=config, seed=seed + k,
+                              virtual_poses=virtual_poses)[0]
+            corners(ix)
+            return (ix, orientation_histogram(ix),
+                    evidence_raster(ix, coarse=config.coarse, max_side=config.coarse_side),
+                    cKDTree(ix.cloud) if len(ix.cloud) else None)
+
+        prepared = run([functools.partial(prepare, k) for k in range(n)], "scans", lambda s: None)
+        indexes = [p[0] for p in prepared]
+        if len({round(i.resolution, 12) for i in indexes}) > 1:
+            raise InputError("the maps have different resolutions; resample them to one first")
+        hists = [p[1] for p in prepared]
+        evidence = [p[2] for p in prepared]
+        trees = {k: p[3] for k, p in enumerate(prepared) if p[3] is not None}
+        seconds["prepare"] = time.perf_counter() - t0
+
+        def estimate(todo, exhaustive=False):
+            jobs = [functools.partial(_pair, indexes, hists, evidence, trees, config, i, j, seed,
+                                      exhaustive) for i, j in todo]
+            return dict(zip(todo, run(jobs, "align", lambda s: todo[s])))
+
         t0 = time.perf_counter()
-        redo = [(i, j) for (i, j), p in pairs.items() if (i in left or j in left) and not p.accepted]
-        for s, (i, j) in enumerate(redo):
-            if callback is not None:
-                callback("align", s, len(redo), (i, j))
-            pairs[(i, j)] = _pair(indexes, hists, evidence, trees, config, i, j, seed,
-                                  exhaustive=True)
+        pairs = estimate(list(itertools.combinations(range(n), 2)))
+        seconds["pairs"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        boxes = [corners(ix) for ix in indexes]
         graph = solve_graph(pairs, indexes, reference, config, boxes)
-        seconds["fallback"] = time.perf_counter() - t0
+        seconds["graph"] = time.perf_counter() - t0
+        left = [k for k in range(n) if graph.transforms[k] is None]
+        if config.fallback and left:
+            # a map left out: search its undecided pairs again, exhaustively
+            t0 = time.perf_counter()
+            redo = [(i, j) for (i, j), p in pairs.items() if (i in left or j in left) and not p.accepted]
+            pairs.update(estimate(redo, exhaustive=True))
+            graph = solve_graph(pairs, indexes, reference, config, boxes)
+            seconds["fallback"] = time.perf_counter() - t0
     return MapsResult(pairs, graph, tuple(indexes), seconds)

@@ -4,9 +4,12 @@
    repeated structure; a single fit of it with a third map that is not clearly stronger than
    those is only used once a loop confirms it (it joins the ambiguous pairs otherwise).
 1. Loops of three accepted pairs are checked: going ``i -> j -> k`` must put map ``k`` where
-   ``i -> k`` does. A pair that breaks more loops than it closes is dropped.
+   ``i -> k`` does. A pair that breaks more loops than it closes is dropped; between pairs that
+   break as many, loops through *witnesses* decide (pairs whose placement passes every
+   threshold but the share of overlapping walls), then the weaker evidence.
 2. An ambiguous pair (several distinct placements verify) is decided by loops through a third
-   map: when exactly one of its placements closes a loop with the other two pairs, it is taken.
+   map: when exactly one of its placements closes loops with the other two pairs (accepted
+   pairs first; then witnesses too), it is taken.
 3. A maximum spanning tree, grown from the reference map, chains the placements; a link's weight
    is its evidence (agreeing wall cells net of misfits, :meth:`Check.quality`).
 4. Every two placed maps are then checked against each other directly; a pair of placed maps
@@ -28,7 +31,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..transform import Transform2D
-from ._pair import ConsensusConfig, displacement
+from ._pair import ConsensusConfig, _plausible, displacement
 from ._verify import refine_icp, verify
 
 __all__ = ["GraphResult", "solve_graph"]
@@ -85,6 +88,12 @@ def _options(edges: dict, ambiguous: dict, i: int, j: int):
     return []
 
 
+def _witnessed(witness: dict, i: int, j: int):
+    """``[(transform j -> i, "witness")]`` when ``(i, j)`` is a witness pair, else ``[]``."""
+    e = _edge(witness, i, j)
+    return [] if e is None else [(e[0], "witness")]
+
+
 def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig,
                 boxes: list) -> GraphResult:
     """Place every map in the reference's frame from the pairwise results ``pairs``
@@ -96,6 +105,13 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     edges = {(p.a, p.b): (p.transform, p.confidence, p.best.check.quality())
              for p in pairs.values() if p.accepted}
     ambiguous = {(p.a, p.b): p.plausible for p in pairs.values() if p.ambiguous}
+    # witnesses: pairs that pass every threshold but the share of overlapping walls (a good fit
+    # of plenty of wall, on a small part of the larger map); they never place a map, but they
+    # may break ties between loops
+    witness = {(p.a, p.b): (p.transform, p.confidence, p.best.check.quality())
+               for p in pairs.values()
+               if not p.accepted and not p.ambiguous and p.best is not None
+               and _plausible(p.best.check, cfg, res, 0, p.diagnostics.get("strict", 1.0))}
     dropped: list = []
     resolved: list = []
 
@@ -119,10 +135,10 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
             if k in (i, j):
                 continue
             # the other two pairs: accepted, or at most one of them ambiguous (one of its options)
-            for t_ik, key_ik in _options(edges, ambiguous, i, k):
-                for t_kj, key_kj in _options(edges, ambiguous, k, j):
-                    if key_ik is not None and key_kj is not None:
-                        continue
+            for t_ik, key_ik in _options(edges, ambiguous, i, k) or _witnessed(witness, i, k):
+                for t_kj, key_kj in _options(edges, ambiguous, k, j) or _witnessed(witness, k, j):
+                    if isinstance(key_ik, int) and isinstance(key_kj, int):
+                        continue                       # two ambiguous pairs prove nothing
                     if consistent(i, k, j, t_ik, t_kj, edges[(i, j)][0]):
                         confirmed = True
         if not confirmed:
@@ -147,34 +163,52 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
         worst = [e for e in edges if bad[e] > good[e]]
         if not worst:
             break
-        e = min(worst, key=lambda e: (good[e] - bad[e], edges[e][2]))
-        dropped.append(e)
-        del edges[e]
-
-    # 2. ambiguous pairs decided by loops through a third map
-    changed = True
-    while changed and ambiguous:
-        changed = False
-        for (i, j), cands in list(ambiguous.items()):
-            closing = set()
+        # ties are broken by loops through a witness: a pair whose placement verified well but
+        # did not gather enough evidence to be accepted on its own (too small an overlap)
+        hint = {e: 0 for e in worst}
+        for (i, j) in worst:
             for k in range(n):
                 if k in (i, j):
                     continue
-                for tik, key_ik in _options(edges, ambiguous, i, k):
-                    if key_ik is not None:
-                        continue                       # the other two pairs must be accepted
-                    for tkj, key_kj in _options(edges, ambiguous, k, j):
-                        if key_kj is not None:
-                            continue
-                        for m, c in enumerate(cands):
-                            if consistent(i, k, j, tik, tkj, c.transform):
-                                closing.add(m)
-            if len(closing) == 1:
-                m = closing.pop()
-                edges[(i, j)] = (cands[m].transform, cands[m].check.score, cands[m].check.quality())
-                del ambiguous[(i, j)]
-                resolved.append((i, j))
-                changed = True
+                wik, ekj = _edge(witness, i, k), _edge(edges, k, j)
+                eik, wkj = _edge(edges, i, k), _edge(witness, k, j)
+                for a, b in ((wik, ekj), (eik, wkj)):
+                    if a is not None and b is not None:
+                        hint[(i, j)] += 1 if consistent(i, k, j, a[0], b[0], edges[(i, j)][0]) else -1
+        e = min(worst, key=lambda e: (good[e] - bad[e], hint[e], edges[e][2]))
+        dropped.append(e)
+        del edges[e]
+
+    # 2. ambiguous pairs decided by loops through a third map: first through accepted pairs
+    #    only, then also through witnesses
+    def link(i, k, with_witness):
+        e = _edge(edges, i, k)
+        if e is None and with_witness and (i, k) not in ambiguous and (k, i) not in ambiguous:
+            e = _edge(witness, i, k)
+        return None if e is None else e[0]
+
+    for with_witness in (False, True):
+        changed = True
+        while changed and ambiguous:
+            changed = False
+            for (i, j), cands in list(ambiguous.items()):
+                closing = set()
+                for k in range(n):
+                    if k in (i, j):
+                        continue
+                    tik, tkj = link(i, k, with_witness), link(k, j, with_witness)
+                    if tik is None or tkj is None:
+                        continue
+                    for m, c in enumerate(cands):
+                        if consistent(i, k, j, tik, tkj, c.transform):
+                            closing.add(m)
+                if len(closing) == 1:
+                    m = closing.pop()
+                    edges[(i, j)] = (cands[m].transform, cands[m].check.score, cands[m].check.quality())
+                    del ambiguous[(i, j)]
+                    witness.pop((i, j), None)
+                    resolved.append((i, j))
+                    changed = True
 
     # 3. maximum spanning tree from the reference, then 4. cross checks of the placed maps
     while True:
@@ -234,8 +268,11 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                            "loop through a third map confirms its one fit")
         elif any(p.ambiguous for p in mine):
             reasons.append("ambiguous: several placements fit and no loop through a third map decides")
-        elif any(p.accepted for p in mine):
+        elif any(k in e for e in dropped):
             reasons.append("its only confident links disagree with the other maps")
+        elif any(p.accepted for p in mine):
+            reasons.append("its confident links reach other maps but none of them links to the "
+                           "reference map")
         else:
             best = max(mine, key=lambda p: p.confidence, default=None)
             reasons.append(best.reason if best is not None and best.reason else

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from .._jit import njit
+
 from ..grid import OccupancyGrid
 from ..scanlog import ScanLog
 from ..unique_poses import scan_spectra
@@ -58,6 +60,9 @@ class MapIndex:
     cloud : (C, 2) float64
         Recorded scans only: the end points of the returned beams (m, map frame), one per
         ``cloud_spacing`` square; empty for virtual or no scans.
+    cache : dict
+        Products computed from the map on first use (its softened wall raster, the corners of
+        its known area) and kept for the map's other pairs.
     """
 
     grid: OccupancyGrid
@@ -76,6 +81,7 @@ class MapIndex:
     spectra: np.ndarray
     ranges_fft: np.ndarray
     cloud: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    cache: dict = field(default_factory=dict, repr=False)
 
     @property
     def resolution(self) -> float:
@@ -114,8 +120,29 @@ def first_per_cell(points: np.ndarray, spacing: float) -> np.ndarray:
     key = np.floor(points[:, :2] / spacing).astype(np.int64)
     key -= key.min(axis=0)
     flat = key[:, 0] * (int(key[:, 1].max()) + 1) + key[:, 1]      # one integer per square
+    size = int(flat.max()) + 1
+    if size <= _FIRST_TABLE_LIMIT:
+        return _first_kernel(flat, size)
     _, first = np.unique(flat, return_index=True)
     return np.sort(first)
+
+
+#: Largest table (squares) :func:`first_per_cell` marks directly; beyond it, it sorts.
+_FIRST_TABLE_LIMIT = 64_000_000
+
+
+@njit
+def _first_kernel(flat, size):
+    seen = np.zeros(size, np.bool_)
+    out = np.empty(flat.size, np.int64)
+    m = 0
+    for i in range(flat.size):
+        f = flat[i]
+        if not seen[f]:
+            seen[f] = True
+            out[m] = i
+            m += 1
+    return out[:m]
 
 
 def spread_indices(poses: np.ndarray, spacing: float, limit: int) -> np.ndarray:

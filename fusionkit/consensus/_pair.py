@@ -15,7 +15,7 @@ from ..transform import Transform2D
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, rotation_candidates
-from ._verify import Check, refine_cloud, refine_icp, refine_pso, verify
+from ._verify import DEFAULT_GATES, Check, refine_cloud, refine_icp, refine_pso, verify
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
 
@@ -59,6 +59,9 @@ class ConsensusConfig:
         At most this many grid candidates (the best correlations) are refined and verified.
     coarse : float
         Cell size (m) of the translation search.
+    coarse_side : int
+        ... coarser when needed to keep the searched raster's longer side within this many
+        cells.
     use_scans : bool
         Use recorded scans (matched spectra) as a source of candidates.
     virtual_scans : bool
@@ -71,9 +74,16 @@ class ConsensusConfig:
         At most this many scans per map are matched.
     max_refine_points : int
         Wall points used by the refiners.
+    alias_peaks : int
+        Translations tried, at the best placement's rotation, in search of aliases (other places
+        where repeated structure fits B as well); 0 to skip that search.
+    coarse_points : int
+        Wall points used by the wide-gate stages of the refinement of every start (the narrow
+        stages use ``max_refine_points``).
     pso_refine : bool
-        Polish the best candidate, and each candidate that could rival it (at most
-        ``pso_top`` in all), with the paper's swarm (eq. 3) in a small box around it after ICP.
+        When a candidate could rival the best one, polish both, and each other such candidate
+        (at most ``pso_top`` in all), with the paper's swarm (eq. 3) in a small box around it
+        after ICP.
     pso_top : int
         See ``pso_refine``.
     fallback : bool
@@ -92,6 +102,9 @@ class ConsensusConfig:
         that disagree.
     pose_graph : bool
         Adjust the placements by least squares over all consistent links (loops).
+    threads : int
+        Threads that prepare the maps and estimate the pairs (0: one per core). One by
+        default: the pairs of most cases are too quick for threads to pay (BENCHMARKS.md).
     """
 
     accept: float = 0.9
@@ -108,12 +121,15 @@ class ConsensusConfig:
     translations: int = 3
     refine_top: int = 16
     coarse: float = 0.1
+    coarse_side: int = 256
     use_scans: bool = True
     virtual_scans: bool = False
     scan_clusters: int = 6
     pose_spacing: float = 0.25
     max_poses: int = 1500
     max_refine_points: int = 4000
+    coarse_points: int = 1000
+    alias_peaks: int = 6
     pso_refine: bool = True
     pso_top: int = 4
     fallback: bool = True
@@ -122,6 +138,7 @@ class ConsensusConfig:
     loop_cells: float = 8.0
     final_check: bool = True
     pose_graph: bool = True
+    threads: int = 1
 
     def __post_init__(self):
         if not 0.0 < self.accept <= 1.0:
@@ -129,9 +146,11 @@ class ConsensusConfig:
         if not (0.0 <= self.max_conflict <= 1.0 and 0.0 <= self.margin <= 1.0 and 0.0 < self.rival <= 1.0):
             raise InputError("max_conflict and margin are fractions in [0, 1], rival in (0, 1]")
         for name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters", "rotation_peaks",
-                     "translations", "refine_top", "max_poses", "max_refine_points", "pso_top"):
+                     "translations", "refine_top", "max_poses", "max_refine_points", "coarse_points",
+                     "pso_top", "alias_peaks", "coarse_side", "threads"):
             v = getattr(self, name)
-            least = 0 if name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters") else 1
+            least = 0 if name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters",
+                                  "alias_peaks", "threads") else 1
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
                 raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
         if not 0.0 <= self.min_overlap_fraction <= 1.0:
@@ -211,6 +230,12 @@ class PairResult:
 
 def corners(index: MapIndex) -> np.ndarray:
     """The four corners (m, map frame) of the bounding box of the map's known cells."""
+    if "corners" not in index.cache:
+        index.cache["corners"] = _corners(index)
+    return index.cache["corners"]
+
+
+def _corners(index: MapIndex) -> np.ndarray:
     r, c = np.nonzero(index.known)
     if r.size == 0:
         r, c = np.array([0, index.grid.rows - 1]), np.array([0, index.grid.cols - 1])
@@ -221,7 +246,15 @@ def corners(index: MapIndex) -> np.ndarray:
 
 def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
     """Largest distance (m) between where ``t1`` and ``t2`` put the points ``pts``."""
-    return float(np.sqrt(((t1(pts) - t2(pts)) ** 2).sum(axis=1)).max())
+    # the points move by t1 - t2 = (R1 - R2) p + (d1 - d2): plain arithmetic, as this is
+    # called for every two candidates of a pair
+    a = math.cos(t1.theta) - math.cos(t2.theta)
+    b = math.sin(t1.theta) - math.sin(t2.theta)
+    ex, ey = t1.x - t2.x, t1.y - t2.y
+    worst = 0.0
+    for x, y in pts.tolist():
+        worst = max(worst, (a * x - b * y + ex) ** 2 + (b * x + a * y + ey) ** 2)
+    return math.sqrt(worst)
 
 
 def _plausible(chk: Check, cfg: ConsensusConfig, resolution: float, walls: int,
@@ -249,6 +282,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     """
     strict = cfg.fallback_strictness if exhaustive else 1.0
     t0 = time.perf_counter()
+    if len(a.points) == 0 or len(b.points) == 0:
+        empty = [k + 1 for k, ix in ((ia, a), (ib, b)) if len(ix.points) == 0]
+        return PairResult(ia, ib, None, 0.0, False, False,
+                          reason=" and ".join(f"map {k}" for k in empty)
+                          + f" hold{'s' if len(empty) == 1 else ''} no occupied cell (wall) to "
+                          "place a map by")
     starts: list[tuple[Transform2D, str]] = []
     rots = rotation_candidates(hist_a, hist_b, cfg.rotation_peaks)
     if exhaustive:
@@ -280,24 +319,55 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     box = corners(b)
     res = a.resolution
     refined: list[Candidate] = []
-    for start, source in starts:
-        t = refine_icp(a, b.refine_points, start)
+    # ICP in two stages: the wide gates on a thinned set of B's walls (most starts converge to
+    # a few placements, which are then refined once), the narrow ones on all of them
+    thin = b.refine_points
+    if len(thin) > cfg.coarse_points:
+        thin = thin[np.linspace(0, len(thin) - 1, cfg.coarse_points).astype(np.int64)]
+    settled: list[Transform2D] = []
+
+    def refine(start: Transform2D, source: str, gates=DEFAULT_GATES[:-2]) -> None:
+        t = refine_icp(a, thin, start, gates=gates)
+        if any(displacement(t, u, box) < res for u in settled):
+            return
+        settled.append(t)
+        t = refine_icp(a, b.refine_points, t, gates=DEFAULT_GATES[-2:])
         if any(displacement(t, c.transform, box) < 2 * res for c in refined):
-            continue
+            return
         refined.append(Candidate(t, verify(a, b, t), source))
+
+    for start, source in starts:
+        refine(start, source)
     refined.sort(key=lambda c: -c.rank)
+    if refined and cfg.alias_peaks and _plausible(refined[0].check, cfg, res,
+                                                  min(len(a.points), len(b.points)), strict):
+        # repeated structure (racks, rooms along a corridor) fits B in several places at the
+        # same rotation; the rotation search keeps only a few translations per rotation, so
+        # look for such aliases of the best placement in its own correlation surface: each one
+        # found that verifies nearly as well makes the pair ambiguous instead of wrongly sure
+        best_t = refined[0].transform
+        for start, _ in corr.translations(best_t.theta, count=cfg.alias_peaks,
+                                          suppress=2 * cfg.distinct_cells * res):
+            refine(start, "aliases", gates=DEFAULT_GATES[1:-2])
+        refined.sort(key=lambda c: -c.rank)
     seconds = time.perf_counter() - t0
     if not refined:
         return PairResult(ia, ib, None, 0.0, False, False, reason="no candidate placement found",
                           seconds=seconds, hypotheses=n_hyp)
     best = refined[0]
-    if cfg.pso_refine:
+    def contender(c: Candidate) -> bool:
+        return c.rank >= cfg.rival * best.rank and c.check.score >= cfg.accept - cfg.margin
+
+    if cfg.pso_refine and any(contender(c) for c in refined[1:cfg.pso_top]):
         # polish the best placement and every contender that could rival it alike, so that
-        # the rival test compares like with like
-        soft = make_field(a.points, res, sigma=1.0)
+        # the rival test compares like with like (a placement without contenders is already
+        # as precise as the walls allow after ICP)
+        if "soft" not in a.cache:
+            a.cache["soft"] = make_field(a.points, res, sigma=1.0)
+        soft = a.cache["soft"]
         rng = np.random.default_rng(seed)
         for k, c in enumerate(refined[:cfg.pso_top]):
-            if k and (c.rank < cfg.rival * best.rank or c.check.score < cfg.accept - cfg.margin):
+            if k and not contender(c):
                 continue
             t = refine_pso(a.points, b.refine_points, c.transform, res, seed=rng, field=soft)
             t = refine_icp(a, b.refine_points, t, gates=(3.0, 2.0))
@@ -361,4 +431,4 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     return PairResult(ia, ib, best.transform, float(chk.score), bool(accepted), bool(ok and rivals),
                       tuple(plausible), best, tuple(refined), len(starts), n_hyp, reason,
                       time.perf_counter() - t0,
-                      {"rotations": len(rots), "check": chk.as_dict()})
+                      {"rotations": len(rots), "check": chk.as_dict(), "strict": strict})

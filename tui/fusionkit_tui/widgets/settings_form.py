@@ -54,6 +54,11 @@ class Setting:
         return what + rng + (" or blank" if self.optional else "")
 
 
+#: The method selected at start: the paper's, whose swarm the convergence plot follows
+#: (``consensus``, the library's default, verifies placements instead and is one pick away).
+TUI_METHOD = "spectral-pso"
+
+
 def _settings() -> tuple[Setting, ...]:
     d = MergeConfig()
     p = d.pso
@@ -178,9 +183,9 @@ class SettingsForm(VerticalScroll):
     def compose(self) -> ComposeResult:
         with Grid():
             yield Label("method")
-            yield Select([(m, m) for m in METHODS], value=MergeConfig().method, allow_blank=False,
+            yield Select([(m, m) for m in METHODS], value=TUI_METHOD, allow_blank=False,
                          compact=True, id="method")
-            yield Static(f"default {MergeConfig().method}: the paper's DFT + Pearson + PSO",
+            yield Static(f"default {TUI_METHOD}: the paper's DFT + Pearson + PSO",
                          classes="hint")
             for s in SETTINGS:
                 yield Label(s.label)
