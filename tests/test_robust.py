@@ -150,7 +150,8 @@ def test_refuses_maps_that_do_not_overlap(intel):
     b = OccupancyGrid(data[380:580, 380:580], intel.resolution, (float(far[0]), float(far[1]), 0.0))
     est = estimate_pair(a, b)
     assert not est.accepted
-    result = merge([a, b], config=MergeConfig(method="consensus"))
+    result = merge([a, b])                                  # the default method
+    assert result.config.method == "consensus"
     assert not result.placements[1].merged
     assert result.placements[1].transform is None
     assert result.placements[1].reason

@@ -305,6 +305,7 @@ async def test_the_consensus_method_runs_from_the_settings(in_root):
         result = screen.result
         assert result is not None and result.config.method == "consensus"
         assert result.all_merged
+        assert "no swarm" in screen.run_panel.plot.note
         assert screen.query_one("#placements", DataTable).row_count == ROBOTS
 
 

@@ -156,7 +156,7 @@ class MainScreen(Screen):
             self.action_show_tab("settings")
             return
         self.merging = True
-        self.run_panel.begin(len(maps), config.pso.iterations)
+        self.run_panel.begin(len(maps), config.pso.iterations, config.method)
         self.action_show_tab("run")
         self._merge(list(maps), config)
 

@@ -26,6 +26,8 @@ class ConvergencePlot(PlotextPlot):
         super().__init__(id=id)
         self._series: list[tuple[str, list[int], list[float]]] = []
         self._colours: list[str | None] = []
+        #: Shown as the title instead of the default one (e.g. why there is nothing to plot).
+        self.note = ""
 
     @property
     def series(self) -> list[tuple[str, list[int], list[float]]]:
@@ -37,8 +39,9 @@ class ConvergencePlot(PlotextPlot):
         """The colour of each line (``"#rrggbb"``, None for plotext's own)."""
         return self._colours
 
-    def reset(self) -> None:
+    def reset(self, note: str = "") -> None:
         self._series, self._colours = [], []
+        self.note = note
         self.refresh()
 
     def start(self, label: str, colour: str | None = None) -> None:
@@ -60,7 +63,7 @@ class ConvergencePlot(PlotextPlot):
         plt = self.plt
         plt.clear_data()
         plt.clear_figure()
-        plt.title("PSO best cost per iteration (eq. 3 MSE)")
+        plt.title(self.note or "PSO best cost per iteration (eq. 3 MSE)")
         plt.xlabel("iteration")
         drawn = False
         no_color = bool(getattr(self.app, "no_color", False))

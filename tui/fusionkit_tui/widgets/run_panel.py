@@ -126,11 +126,13 @@ class RunPanel(Vertical):
         self.query_one("#detail", Static).update("not run yet: select two or more maps and press r")
         self.query_one("#left", Static).update("")
 
-    def begin(self, maps: int, iterations: int) -> None:
-        """A merge of ``maps`` maps with up to ``iterations`` PSO iterations per alignment starts."""
+    def begin(self, maps: int, iterations: int, method: str = "spectral-pso") -> None:
+        """A merge of ``maps`` maps with up to ``iterations`` PSO iterations per alignment starts
+        (with ``method``: only the paper's method reports its swarms)."""
         self._iterations = iterations
         self._stage, self._step, self._where = "", -1, (0, 0)
-        self.plot.reset()
+        self.plot.reset("" if method == "spectral-pso" else
+                        f"{method}: no swarm to watch (the paper's method, spectral-pso, has one)")
         self._legend()
         self.query_one(ProgressBar).update(progress=0)
         self.query_one("#stages", Static).update(self._stages("scans"))
