@@ -187,7 +187,7 @@ def _usable(g: OccupancyGrid) -> str:
     """Why a world cannot be used ("" when it can)."""
     occ = int(g.occupied_mask().sum())
     if occ < MIN_WORLD_OCCUPIED:
-        return f"only {occ} occupied cells (needs {MIN_WORLD_OCCUPIED})"
+        return f"only {occ} occupied cells, needs {MIN_WORLD_OCCUPIED}"
     if int(g.free_mask().sum()) < 20 * MIN_WORLD_OCCUPIED:
         return "too little free space"
     r, c = np.nonzero(g.known_mask())
@@ -787,10 +787,10 @@ def _render(path: Path, showcase: dict, method: str, record: dict) -> None:
     cmap = ListedColormap(["#d0d0d0", "#f4f4f4", "#ffffff", "#9ab0d8", "#d62728", "#1a1a1a"])
     fig, ax = plt.subplots(figsize=(7, 7 * (r1 - r0) / max(c1 - c0, 1) + 0.8))
     ax.imshow(img[r0:r1, c0:c1], origin="lower", cmap=cmap, vmin=-0.5, vmax=5.5, interpolation="nearest")
-    st = [e["status"][0].upper() for e in record["maps"]]
-    ax.set_title(f"{method}: case {showcase['index']} ({record.get('world', '')}), maps 2..: "
-                 f"{' '.join(st)}\nblack: walls on the truth, red: walls off the truth, blue: "
-                 f"truth walls not mapped", fontsize=9)
+    st = [f"map {e['map'] + 1} {e['status']}" for e in record["maps"]]
+    ax.set_title(f"{method}: case {showcase['index']} ({record.get('world', '')}; the same case for "
+                 f"every method)\n{', '.join(st)}\nblack: walls on the truth, red: walls off "
+                 f"the truth, blue: truth walls not mapped", fontsize=9)
     ax.set_xticks([])
     ax.set_yticks([])
     fig.tight_layout()

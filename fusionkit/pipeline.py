@@ -224,7 +224,8 @@ class MergeResult:
         return all(p.merged for p in self.placements)
 
     def report(self, inputs: Sequence[str] | None = None, output: str | None = None) -> dict:
-        """The CONTRACTS section 6 report (``inputs`` as given on the command line)."""
+        """The CONTRACTS section 6 report (``inputs`` as given on the command line); a map left
+        out also carries the ``reason`` it was left out."""
         names = list(inputs) if inputs is not None else [p.name for p in self.placements]
         return {
             "method": self.config.method,
@@ -232,7 +233,8 @@ class MergeResult:
             "output": output,
             "maps": [{"input": names[p.index], "merged": p.merged,
                       "confidence": round(float(p.confidence), 4),
-                      "transform": None if p.transform is None else p.transform.as_dict()}
+                      "transform": None if p.transform is None else p.transform.as_dict(),
+                      **({} if p.merged else {"reason": p.reason})}
                      for p in self.placements],
             "fusion_order": [[names[a], names[b]] for a, b in self.fusion_order],
             "seconds": {k: round(v, 3) for k, v in self.seconds.items()},

@@ -135,6 +135,7 @@ def test_cli_merge_exit_3_when_a_map_does_not_fit(tmp_path, run_dir, capsys):
     assert code == 3
     rep = json.loads((tmp_path / "m.report.json").read_text())
     assert rep["maps"][1]["merged"] is False and rep["maps"][1]["transform"] is None
+    assert rep["maps"][1]["reason"] and "reason" not in rep["maps"][0]
     assert load_map(out).shape == load_map(run_dir / "robot_1.yaml").shape or out.exists()
 
 

@@ -39,7 +39,9 @@ def register(sub) -> None:
     p.add_argument("--modes", nargs="+", choices=MODES, default=list(d.modes),
                    help=f"kinds of case (default: {' '.join(d.modes)})")
     p.add_argument("--cases", type=int_range(1, 100000), default=d.cases,
-                   help=f"number of cases (default {d.cases}); worlds, modes and K are cycled")
+                   help=f"number of cases (default {d.cases}); the worlds are cycled, then the "
+                        f"modes (one mode per round of worlds, so fewer cases than worlds are all "
+                        f"of the first mode), and K")
     p.add_argument("--robots", nargs="+", type=int_range(2, 5), default=list(d.robots), metavar="K",
                    help=f"maps per case, cycled (default: {' '.join(map(str, d.robots))})")
     p.add_argument("--min-overlap", type=float_range(0, 1, lo_open=True), default=d.min_overlap,
@@ -111,7 +113,8 @@ def run(args) -> int:
     if not args.quiet:
         if skipped:
             print("not used: " + "; ".join(f"{n} ({w})" for n, w in skipped))
-        print(f"{len(result.cases)} cases on {len(worlds)} worlds in {result.seconds:.0f} s")
+        used = len({c["world"] for c in result.cases})
+        print(f"{len(result.cases)} cases on {used} of {len(worlds)} worlds in {result.seconds:.0f} s")
         print(format_table(result, summary))
         print("wrote " + ", ".join(str(p) for p in paths))
     return 0

@@ -85,7 +85,7 @@ def format_placements(result, names) -> str:
             t = p.transform
             lines.append(f"{name:<28} {'yes':<7} {p.confidence:5.2f} {t.x:8.2f} {t.y:8.2f} "
                          f"{math.degrees(t.theta):11.1f}")
-    order = " , ".join(f"{names[a]} + {names[b]}" for a, b in result.fusion_order) or "(none)"
+    order = ", ".join(f"{names[a]} + {names[b]}" for a, b in result.fusion_order) or "(none)"
     lines.append(f"fusion order: {order}")
     lines.append(f"method: {result.config.method}; time: "
                  + ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items()))
