@@ -70,7 +70,7 @@ def main() -> None:
     runs = [(m, threads) for m in methods for threads in (1, 0)]
 
     def config(m, threads, seed):
-        return MergeConfig(method=m, seed=seed, consensus=ConsensusConfig(threads=threads or 0))
+        return MergeConfig(method=m, seed=seed, consensus=ConsensusConfig(threads=threads))
 
     def set_threads(threads):
         n = threads or os.cpu_count() or 1

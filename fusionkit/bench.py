@@ -463,7 +463,6 @@ def run_case(spec: CaseSpec, config: BenchConfig, keep_grids: bool = False) -> d
     ``keep_grids``, the fused grids for pictures)."""
     from .fusion import fuse_maps
     from .metrics import evaluate_map
-    from .consensus import ConsensusConfig
     from .pipeline import MergeConfig, merge
 
     t0 = time.perf_counter()
@@ -487,10 +486,8 @@ def run_case(spec: CaseSpec, config: BenchConfig, keep_grids: bool = False) -> d
         rec = {"maps": [], "error": ""}
         try:
             t1 = time.perf_counter()
-            consensus = ConsensusConfig(threads=1) if _ONE_THREAD else None
             result = merge(list(case.grids), scans=scans,
-                           config=MergeConfig(method=method, seed=spec.seed % 10_000,
-                                              consensus=consensus))
+                           config=MergeConfig(method=method, seed=spec.seed % 10_000))
             seconds = time.perf_counter() - t1
             transforms = result.transforms
             fused = result.grid
@@ -527,14 +524,9 @@ def run_case(spec: CaseSpec, config: BenchConfig, keep_grids: bool = False) -> d
     return out
 
 
-#: Set in the worker processes of a parallel run: every method then runs on one thread (the
-#: workers share the cores), so that timings compare like with like.
-_ONE_THREAD = False
-
-
 def _worker_init():
-    global _ONE_THREAD
-    _ONE_THREAD = True
+    # the workers share the cores: every method runs on one thread, so that timings compare
+    # like with like (the consensus method does by default)
     import cv2
     import numba
     numba.set_num_threads(1)

@@ -17,9 +17,10 @@ __all__ = ["Transform2D", "wrap_angle"]
 
 def wrap_angle(theta):
     """Wrap an angle (radians, scalar or array) into ``[-pi, pi)``."""
-    return (np.asarray(theta) + np.pi) % (2.0 * np.pi) - np.pi if np.ndim(theta) else (
-        (float(theta) + math.pi) % (2.0 * math.pi) - math.pi
-    )
+    if isinstance(theta, (float, int)) or np.ndim(theta) == 0:
+        # plain arithmetic for a scalar: transforms are made in inner loops
+        return (float(theta) + math.pi) % (2.0 * math.pi) - math.pi
+    return (np.asarray(theta) + np.pi) % (2.0 * np.pi) - np.pi
 
 
 @dataclass(frozen=True)
@@ -40,14 +41,13 @@ class Transform2D:
     theta: float = 0.0
 
     def __post_init__(self):
-        # plain floats and math: transforms are made in inner loops
         x, y, theta = float(self.x), float(self.y), float(self.theta)
         for name, v in (("x", x), ("y", y), ("theta", theta)):
             if not math.isfinite(v):
                 raise ValueError(f"transform {name} must be finite, got {v}")
         object.__setattr__(self, "x", x)
         object.__setattr__(self, "y", y)
-        object.__setattr__(self, "theta", (theta + math.pi) % (2.0 * math.pi) - math.pi)
+        object.__setattr__(self, "theta", wrap_angle(theta))
 
     # -- constructors -------------------------------------------------------------------------
     @classmethod

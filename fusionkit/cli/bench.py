@@ -34,8 +34,7 @@ def register(sub) -> None:
                         f"folder is given, none otherwise")
     p.add_argument("--methods", nargs="+", choices=METHODS, default=list(DEFAULT_METHODS), metavar="M",
                    help=f"methods to compare (default: {' '.join(DEFAULT_METHODS)}"
-                        + ("".join(f"; also {m}" for m in METHODS if m not in DEFAULT_METHODS))
-                        + ")")
+                        f"{''.join(f'; also {m}' for m in METHODS if m not in DEFAULT_METHODS)})")
     p.add_argument("--modes", nargs="+", choices=MODES, default=list(d.modes),
                    help=f"kinds of case (default: {' '.join(d.modes)})")
     p.add_argument("--cases", type=int_range(1, 100000), default=d.cases,

@@ -161,19 +161,13 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
 
         def run(jobs, stage, label):
             # results are gathered in a fixed order, so they do not depend on the threads
-            if pool is None:
-                out = []
-                for step, fn in enumerate(jobs):
-                    if callback is not None:
-                        callback(stage, step, len(jobs), label(step))
-                    out.append(fn())
-                return out
-            futures = [pool.submit(fn) for fn in jobs]
-            for step, fut in enumerate(futures):
+            futures = None if pool is None else [pool.submit(fn) for fn in jobs]
+            out = []
+            for step, fn in enumerate(jobs):
                 if callback is not None:
-                    callback(stage, step, len(futures), label(step))
-                fut.result()
-            return [f.result() for f in futures]
+                    callback(stage, step, len(jobs), label(step))
+                out.append(fn() if futures is None else futures[step].result())
+            return out
 
         def prepare(k):
             ix = prepare_maps([grids[k]], [scans[k]], config=config, seed=seed + k,

@@ -13,7 +13,6 @@ import cv2
 import numpy as np
 
 from .._jit import njit
-
 from ..grid import OccupancyGrid
 from ..scanlog import ScanLog
 from ..unique_poses import scan_spectra

@@ -355,7 +355,9 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         return PairResult(ia, ib, None, 0.0, False, False, reason="no candidate placement found",
                           seconds=seconds, hypotheses=n_hyp)
     best = refined[0]
+
     def contender(c: Candidate) -> bool:
+        """Whether ``c`` fits nearly as well as the current best placement."""
         return c.rank >= cfg.rival * best.rank and c.check.score >= cfg.accept - cfg.margin
 
     if cfg.pso_refine and any(contender(c) for c in refined[1:cfg.pso_top]):
@@ -398,8 +400,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     # to make the best placement unsure
     rivals = []
     for c in refined[1:]:
-        if (c.check.score >= cfg.accept - cfg.margin and c.rank >= cfg.rival * best.rank
-                and displacement(c.transform, best.transform, box) > cfg.distinct_cells * res):
+        if contender(c) and displacement(c.transform, best.transform, box) > cfg.distinct_cells * res:
             rivals.append(c)
     accepted = ok and not rivals
     if ok and rivals:
