@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fusionkit.baselines import ESTIMATORS, crop_pair, placement_error
+from fusionkit.methods.peers import ESTIMATORS, crop_pair, placement_error
 from fusionkit.mapio import load_map
 from fusionkit.worlds import make_cave
 

@@ -30,7 +30,7 @@ import numba
 import numpy as np
 
 from fusionkit.bench import BenchConfig, find_worlds, make_case, plan_cases
-from fusionkit.consensus import ConsensusConfig
+from fusionkit.methods.consensus import ConsensusConfig
 from fusionkit.pipeline import MergeConfig, merge
 
 METHODS = ("consensus", "map-merge", "fourier-mellin")

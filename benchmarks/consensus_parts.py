@@ -4,7 +4,7 @@
 
 The cases are those of ``fusionkit bench`` (seed ``--seed``) over maps/ and
 ../shared/maps/real when it stands beside the repository, else maps/real. Each variant of
-:class:`fusionkit.consensus.ConsensusConfig` merges every case in this one process (one thread,
+:class:`fusionkit.methods.consensus.ConsensusConfig` merges every case in this one process (one thread,
 so that times compare); a pair is placed right within 2 degrees and 3 cells of the truth, as in
 ``fusionkit bench``. Prints, per mode and variant, the pairs placed right, wrong and refused,
 the median centroid error of the right ones (cells) and the median time per pair.
@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 from fusionkit.bench import BenchConfig, find_worlds, make_case, plan_cases
-from fusionkit.consensus import ConsensusConfig
+from fusionkit.methods.consensus import ConsensusConfig
 from fusionkit.pipeline import MergeConfig, merge
 
 VARIANTS = {

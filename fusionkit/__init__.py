@@ -4,10 +4,10 @@ The paper's method, "Map Fusion for Precise Yet Efficient Collaborative SLAM" (`
 "spectral-pso"``): unique poses by the DFT of the scans (Algorithm 1), the fusion order by
 Pearson correlation of their spectra (eq. 2), the alignment by Particle Swarm Optimization of a
 mask MSE (eq. 3), then transform (eq. 4) and fusion (Section 3.6), measured by the paper's
-Table 1 metrics. The default method, ``"consensus"`` (:mod:`fusionkit.consensus`), builds on
+Table 1 metrics. The default method, ``"consensus"`` (:mod:`fusionkit.methods.consensus`), builds on
 it: placements from every scan and from the walls, each verified on the whole maps, kept
 consistent over all maps, and refused when not sure. The classic peers are in
-:mod:`fusionkit.baselines`.
+:mod:`fusionkit.methods.peers`.
 
 Quick start::
 

@@ -1,5 +1,11 @@
 """The whole chain of the paper's Fig. 1 behind one call: :func:`merge`.
 
+:func:`merge` loads and checks the maps, brings them to one resolution, hands them to the
+chosen method (:mod:`fusionkit.methods`: the paper's method, the consensus method or a classic
+peer, all behind one interface), fuses every placed map into the reference frame (Section 3.6,
+:mod:`fusionkit.fusion`) and builds the :class:`MergeResult`. For the paper's method
+(:mod:`fusionkit.methods.paper`) that is, in the order of Fig. 1:
+
 1. every map gets its scans (its ``.scans.npz``, or virtual scans cast in its free space);
 2. unique poses by the DFT of the scans (Algorithm 1, :mod:`fusionkit.unique_poses`);
 3. agreement between every two robots' unique poses and the fusion order (eq. 2,
@@ -7,7 +13,7 @@
 4. for each step of the order, the alignment by PSO on the masks' MSE (eqs. 3-4,
    :mod:`fusionkit.alignment`), checked against the maps already fused: a map that does not
    fit with confidence is left out, never forced;
-5. the fusion of every placed map into the reference frame (Section 3.6, :mod:`fusionkit.fusion`).
+5. the fusion of every placed map into the reference frame (here).
 """
 
 from __future__ import annotations
@@ -17,30 +23,21 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
-import numpy as np
-
-from .alignment import (Alignment, AlignmentConfig, align_points, mask_points, overlap_score,
-                        refine_points, seed_transforms)
-from .consensus import ConsensusConfig
+from .alignment import AlignmentConfig
 from .errors import FusionkitError, InputError
 from .fusion import FusedMap, fuse_maps
 from .grid import OccupancyGrid
-from .pairing import FusionPlan, PairAgreement, agreement, fusion_order
-from .pso import PSOConfig, PSOState
+from .methods import METHODS, get_method
+from .methods.base import MergeEvent, MergeStep, PreparedMaps
+from .methods.consensus import ConsensusConfig
+from .pairing import FusionPlan
+from .pso import PSOConfig
 from .resample import canvas_for, resample
 from .scanlog import ScanLog, load_scans, scans_path_for
 from .transform import Transform2D
-from .unique_poses import find_unique_poses
 
 __all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MergeStep", "MergeResult", "MergeCancelled",
            "merge", "METHODS", "load_inputs"]
-
-#: Method names accepted by :func:`merge` and ``fusionkit merge --method``: the paper's method,
-#: the consensus method (:mod:`fusionkit.consensus`) and the classic peers
-#: (:mod:`fusionkit.baselines`; ``map-merge-shipped`` chains 3+ maps in the order OpenCV does).
-METHODS = ("spectral-pso", "consensus", "map-merge", "map-merge-shipped", "hough-spectrum",
-           "fourier-mellin")
-
 
 class MergeCancelled(FusionkitError):
     """The callback asked the merge to stop."""
@@ -54,11 +51,11 @@ class MergeConfig:
     ----------
     method : str
         ``"consensus"`` (default): verified hypotheses from scans and walls, kept consistent
-        over all maps, refused when unsure (:mod:`fusionkit.consensus`; ahead of the paper's
+        over all maps, refused when unsure (:mod:`fusionkit.methods.consensus`; ahead of the paper's
         method and the peers in ``fusionkit bench``, see BENCHMARKS.md); ``"spectral-pso"``:
         the paper's method (unique poses, Pearson pairing, PSO; what ``fusionkit run`` and the
         notebooks reproduce); ``"map-merge"``, ``"map-merge-shipped"``, ``"hough-spectrum"``,
-        ``"fourier-mellin"``: the classic peers (:mod:`fusionkit.baselines`). The settings
+        ``"fourier-mellin"``: the classic peers (:mod:`fusionkit.methods.peers`). The settings
         below are the paper's method's unless noted.
     sub_sec : int
         Half-width of Algorithm 1's sections (poses).
@@ -123,24 +120,6 @@ class MergeConfig:
 
 
 @dataclass(frozen=True)
-class MergeEvent:
-    """Progress of a merge, as the callback sees it.
-
-    ``stage`` is one of ``"scans"``, ``"unique_poses"``, ``"pairing"``, ``"align"``, ``"fuse"``,
-    ``"done"``; ``step`` of ``total`` counts work in that stage; ``label`` says what is being
-    done ("robot_2 -> robot_1"); during ``"align"``, ``pso`` is the swarm's state after each
-    iteration and ``pair`` the ``(placed, new)`` map indices.
-    """
-
-    stage: str
-    step: int
-    total: int
-    label: str = ""
-    pair: tuple | None = None
-    pso: PSOState | None = None
-
-
-@dataclass(frozen=True)
 class MapPlacement:
     """Where one input map went. ``transform`` maps its frame into the merged (reference)
     frame, None when it was not merged; ``confidence`` is its overlap score in [0, 1]."""
@@ -152,20 +131,6 @@ class MapPlacement:
     confidence: float
     overlap_cells: int = 0
     reason: str = ""
-
-
-@dataclass(frozen=True, eq=False)
-class MergeStep:
-    """One alignment of the fusion order: map ``new`` against the fused maps (anchor ``placed``)."""
-
-    placed: int
-    new: int
-    alignment: Alignment | None
-    transform: Transform2D | None
-    confidence: float
-    overlap_cells: int
-    accepted: bool
-    matches: int
 
 
 @dataclass(frozen=True, eq=False)
@@ -317,159 +282,23 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
         if callback is not None and callback(ev):
             raise MergeCancelled("merge cancelled")
 
-    if config.method != "spectral-pso":
-        from .consensus._merge import merge_with
-        return merge_with(config.method, grids, scans, names, config, emit, t_start)
+    method = get_method(config.method)
+    placed = method.place(PreparedMaps(tuple(grids), tuple(scans), tuple(names), config.reference),
+                          method.settings(config), emit)
+    seconds.update(placed.seconds)
 
-    # 1. scans: recorded, or cast virtually in the map's free space
-    t0 = time.perf_counter()
-    from .virtual_scans import virtual_scans
-    logs, virtual = [], []
-    for k, (g, s) in enumerate(zip(grids, scans)):
-        emit(MergeEvent("scans", k, len(grids), names[k]))
-        if s is None:
-            s = virtual_scans(g, n_poses=config.virtual_poses, seed=config.seed + k)
-            virtual.append(True)
-        else:
-            virtual.append(False)
-        logs.append(s)
-    beams = {s.n_beams for s in logs}
-    if len(beams) > 1:
-        raise InputError(f"the maps' scans have different beam counts {sorted(beams)}; spectra can "
-                         "only be compared between scans of the same beam count")
-    seconds["scans"] = time.perf_counter() - t0
-
-    # 2. unique poses (Algorithm 1)
-    t0 = time.perf_counter()
-    unique = []
-    for k, s in enumerate(logs):
-        emit(MergeEvent("unique_poses", k, len(logs), names[k]))
-        try:
-            unique.append(find_unique_poses(s, sub_sec=config.sub_sec, delta=config.delta,
-                                            target=config.unique_count))
-        except InputError as exc:
-            raise InputError(f"{names[k]}: {exc}") from None
-    seconds["unique_poses"] = time.perf_counter() - t0
-
-    # 3. agreement and fusion order (eq. 2)
-    t0 = time.perf_counter()
-    n = len(grids)
-    counts = np.zeros((n, n), int)
-    agreements: dict = {}
-    for a in range(n):
-        for b in range(a + 1, n):
-            emit(MergeEvent("pairing", len(agreements), n * (n - 1) // 2, f"{names[a]} ~ {names[b]}"))
-            ag = agreement(unique[a].unique_spectra, unique[b].unique_spectra, config.theta, a=a, b=b)
-            agreements[(a, b)] = ag
-            counts[a, b] = counts[b, a] = ag.count
-    plan = fusion_order(counts)
-    seconds["pairing"] = time.perf_counter() - t0
-
-    # 4. alignment, step by step, each checked against what is already fused
-    t0 = time.perf_counter()
-    rng = np.random.default_rng(config.seed)
-    transforms: list = [None] * n
-    confidence = [0.0] * n
-    overlap = [0] * n
-    reasons = [""] * n
-    steps: list[MergeStep] = []
-    accepted_order: list = []
-    if plan.steps:
-        first = plan.steps[0][0]
-        transforms[first] = Transform2D.identity()
-        confidence[first] = 1.0
-    for si, (anchor, new) in enumerate(plan.steps):
-        placed = [k for k in range(n) if transforms[k] is not None]
-        ref_pts, mov_idx, seeds = [], set(), []
-        for p in placed:
-            ag = _pair(agreements, p, new)
-            if ag.count == 0:
-                continue
-            up, un = unique[p].indices, unique[new].indices
-            matched_p = up[np.unique(ag.matches[:, 0])]
-            ref_pts.append(transforms[p](mask_points(logs[p], matched_p)))
-            mov_idx.update(un[np.unique(ag.matches[:, 1])].tolist())
-            if config.alignment.seeded:
-                pairs = [(up[i], un[j]) for i, j in ag.matches[: config.alignment.max_seeds]]
-                seeds += [(ag_rho, transforms[p] @ t) for ag_rho, t in
-                          zip(ag.rho[ag.matches[:, 0], ag.matches[:, 1]][: len(pairs)],
-                              seed_transforms(logs[p], logs[new], pairs))]
-        seeds.sort(key=lambda st: -st[0])
-        label = f"{names[new]} -> {names[anchor]}"
-
-        def pso_cb(state: PSOState, _si=si, _label=label, _pair=(anchor, new)):
-            emit(MergeEvent("align", _si, len(plan.steps), _label, _pair, state))
-
-        emit(MergeEvent("align", si, len(plan.steps), label, (anchor, new)))
-        mov_pts = mask_points(logs[new], sorted(mov_idx))
-        if not ref_pts or len(mov_pts) == 0:
-            steps.append(MergeStep(anchor, new, None, None, 0.0, 0, False, 0))
-            reasons[new] = "no matched scan end points to align"
-            continue
-        al = align_points(np.concatenate(ref_pts), mov_pts, grids[config.reference].resolution,
-                          config=config.alignment, seeds=[t for _, t in seeds], seed=rng,
-                          callback=pso_cb)
-        fused_now = fuse_maps([grids[k] for k in placed], [transforms[k] for k in placed]).grid
-        if config.refine:
-            fine = refine_points(fused_now.occupied_points(), grids[new].occupied_points(),
-                                 al.transform, grids[config.reference].resolution,
-                                 config=config.alignment, seed=rng, callback=pso_cb)
-            al = replace(al, transform=fine.transform, params=fine.params, cost=fine.cost,
-                         refinement=fine.pso)
-        score, cells = overlap_score(fused_now, grids[new], al.transform)
-        ok = score >= config.accept and cells >= config.min_overlap_cells
-        steps.append(MergeStep(anchor, new, al, al.transform, score, cells, ok,
-                               int(_pair(agreements, anchor, new).count)))
-        confidence[new], overlap[new] = score, cells
-        if ok:
-            transforms[new] = al.transform
-            accepted_order.append((anchor, new))
-        else:
-            reasons[new] = (f"best alignment agrees on {100 * score:.0f}% of {cells} overlapping "
-                            f"wall cells (needs {100 * config.accept:.0f}% of >= {config.min_overlap_cells})")
-    seconds["align"] = time.perf_counter() - t0
-
-    # express everything in the reference map's frame
-    ref = config.reference
-    if transforms[ref] is None:
-        # the reference was not placed with the others: it stands alone, the rest is not merged
-        transforms = [None] * n
-        transforms[ref] = Transform2D.identity()
-        confidence = [0.0] * n
-        accepted_order = []
-        for k in range(n):
-            if k != ref:
-                reasons[k] = reasons[k] or "no confident link to the reference map"
-    else:
-        to_ref = transforms[ref].inverse
-        transforms = [None if t is None else to_ref @ t for t in transforms]
-    confidence[ref] = 1.0
-    for k in plan.unplaced:
-        reasons[k] = reasons[k] or "its unique poses agree with none of the placed maps"
-
-    # 5. fusion (Section 3.6), in the accepted order
+    # the fusion (Section 3.6), in the method's order
     t0 = time.perf_counter()
     emit(MergeEvent("fuse", 0, 1, "fusing"))
-    order = [accepted_order[0][0]] + [k for _, k in accepted_order] if accepted_order else []
-    if ref not in order:
-        order.insert(0, ref)
-    fused = fuse_maps(grids, transforms, order=order, keep_steps=True)
+    transforms = [p.transform for p in placed.placements]
+    fused = fuse_maps(grids, transforms, order=list(placed.order), keep_steps=True)
     seconds["fuse"] = time.perf_counter() - t0
     seconds["total"] = time.perf_counter() - t_start
     placements = tuple(
-        MapPlacement(k, names[k], transforms[k] is not None, transforms[k],
-                     float(confidence[k]),
-                     int(overlap[k]), "" if transforms[k] is not None else reasons[k])
-        for k in range(n))
+        MapPlacement(k, names[k], p.transform is not None, p.transform, float(p.confidence),
+                     int(p.overlap_cells), "" if p.transform is not None else p.reason)
+        for k, p in enumerate(placed.placements))
     emit(MergeEvent("done", 1, 1, "done"))
-    return MergeResult(fused.grid, placements, tuple(accepted_order), tuple(order), fused, tuple(unique), plan,
-                       agreements, tuple(steps), tuple(logs), tuple(virtual), config, seconds)
-
-
-def _pair(agreements: dict, a: int, b: int) -> PairAgreement:
-    """The agreement of maps a and b with a's unique poses first."""
-    if a < b:
-        return agreements[(a, b)]
-    ag = agreements[(b, a)]
-    m = ag.matches[:, ::-1] if ag.count else ag.matches
-    return PairAgreement(a, b, ag.rho.T, np.ascontiguousarray(m), ag.count)
+    return MergeResult(fused.grid, placements, placed.links, placed.order, fused, placed.unique,
+                       placed.plan, placed.agreements, placed.steps, placed.scans, placed.virtual,
+                       config, seconds)

@@ -12,9 +12,9 @@ import cv2
 import numpy as np
 import pytest
 
-from fusionkit.baselines import ESTIMATORS, PairEstimate, crop_pair, placement_error
-from fusionkit.baselines import fourier_mellin, hough_spectrum, map_merge
-from fusionkit.baselines._common import (acceptance_index, cell_to_map, make_options, map_to_cell,
+from fusionkit.methods.peers import ESTIMATORS, PairEstimate, crop_pair, placement_error
+from fusionkit.methods.peers import fourier_mellin, hough_spectrum, map_merge
+from fusionkit.methods.peers._common import (acceptance_index, cell_to_map, make_options, map_to_cell,
                                          prepare_pair, warp_cells)
 from fusionkit.errors import InputError
 from fusionkit.grid import OccupancyGrid

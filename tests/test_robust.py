@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fusionkit.baselines import crop_pair, placement_error
-from fusionkit.consensus import (Check, ConsensusConfig, PairResult, estimate_maps, estimate_pair,
+from fusionkit.methods.peers import crop_pair, placement_error
+from fusionkit.methods.consensus import (Check, ConsensusConfig, PairResult, estimate_maps, estimate_pair,
                                  prepare_maps, verify)
-from fusionkit.consensus._graph import solve_graph
-from fusionkit.consensus._hypotheses import Hypotheses, cluster_hypotheses
-from fusionkit.consensus._pair import Candidate
-from fusionkit.consensus._pair import displacement
-from fusionkit.consensus._verify import (_one_way, _one_way_numpy, refine_cloud, refine_icp,
+from fusionkit.methods.consensus._graph import solve_graph
+from fusionkit.methods.consensus._hypotheses import Hypotheses, cluster_hypotheses
+from fusionkit.methods.consensus._pair import Candidate
+from fusionkit.methods.consensus._pair import displacement
+from fusionkit.methods.consensus._verify import (_one_way, _one_way_numpy, refine_cloud, refine_icp,
                                        refine_icp_numpy, rigid_fit)
 from fusionkit.errors import InputError
 from fusionkit.grid import OccupancyGrid

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._jit import njit
-from ..alignment import make_field, mse_cost
-from ..pso import PSOConfig, pso_minimize
-from ..transform import Transform2D
+from ..._jit import njit
+from ...alignment import make_field, mse_cost
+from ...pso import PSOConfig, pso_minimize
+from ...transform import Transform2D
 from ._index import MapIndex
 
 __all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_cloud", "refine_pso", "Check",

@@ -1,9 +1,9 @@
 """Three classic map-merging methods fusionkit is measured against.
 
-* :mod:`~fusionkit.baselines.map_merge`: AKAZE features, RANSAC and spanning-tree chaining as
+* :mod:`~fusionkit.methods.peers.map_merge`: AKAZE features, RANSAC and spanning-tree chaining as
   in ROS ``multirobot_map_merge``;
-* :mod:`~fusionkit.baselines.hough_spectrum`: Carpin's Hough-spectrum merging (2008);
-* :mod:`~fusionkit.baselines.fourier_mellin`: Fourier-Mellin phase correlation (Reddy and
+* :mod:`~fusionkit.methods.peers.hough_spectrum`: Carpin's Hough-spectrum merging (2008);
+* :mod:`~fusionkit.methods.peers.fourier_mellin`: Fourier-Mellin phase correlation (Reddy and
   Chatterji, 1996).
 
 Each module has ``estimate_pair(a, b, *, seed=0, **options) -> PairEstimate`` returning the

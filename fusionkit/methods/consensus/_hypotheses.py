@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..transform import Transform2D
+from ...transform import Transform2D
 from ._index import MapIndex
 
 __all__ = ["Hypotheses", "scan_hypotheses", "Cluster", "cluster_hypotheses"]

@@ -58,9 +58,9 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..errors import InputError
-from ..grid import OccupancyGrid
-from ..transform import Transform2D
+from ...errors import InputError
+from ...grid import OccupancyGrid
+from ...transform import Transform2D
 from ._common import PairEstimate, Stopwatch, cell_to_map, make_options, prepare_pair
 
 __all__ = ["MapMergeOptions", "MapsEstimate", "estimate_pair", "estimate_maps", "grid_image", "METHOD"]

@@ -34,9 +34,9 @@ from typing import Callable, Sequence
 
 from scipy.spatial import cKDTree
 
-from ..errors import InputError
-from ..grid import OccupancyGrid
-from ..scanlog import ScanLog
+from ...errors import InputError
+from ...grid import OccupancyGrid
+from ...scanlog import ScanLog
 from ._graph import GraphResult, solve_graph
 from ._index import MapIndex, index_map
 from ._pair import Candidate, ConsensusConfig, PairResult, corners, estimate_indexed
@@ -66,7 +66,7 @@ def prepare_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None]
         if s is None or not config.use_scans:
             s = None
             if config.use_scans and config.virtual_scans and g.free_mask().any():
-                from ..virtual_scans import virtual_scans
+                from ...virtual_scans import virtual_scans
                 s = virtual_scans(g, n_poses=virtual_poses, seed=seed + k)
                 virtual = True
         out.append(index_map(g, s, virtual=virtual, pose_spacing=config.pose_spacing,
@@ -89,13 +89,13 @@ def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None
 
     Returns
     -------
-    fusionkit.baselines.PairEstimate
+    fusionkit.methods.peers.PairEstimate
         ``transform`` maps b's frame into a's (m, rad), ``confidence`` is the verification
         score (0..1), ``accepted`` whether it passed; ``candidates`` lists every distinct
         placement that passed the thresholds; ``diagnostics["pair"]`` is the
         :class:`PairResult`.
     """
-    from ..baselines import PairEstimate
+    from ..peers import PairEstimate
     t0 = time.perf_counter()
     ia, ib = prepare_maps([a, b], [scans_a, scans_b], config=config, seed=seed)
     pr = estimate_indexed(ia, ib, config, hist_a=orientation_histogram(ia),

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..transform import Transform2D
+from ...transform import Transform2D
 from ._pair import ConsensusConfig, _plausible, displacement
 from ._verify import refine_icp, verify
 

@@ -17,10 +17,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import InputError
-from ..grid import OCCUPIED, UNKNOWN, OccupancyGrid
-from ..resample import resample
-from ..transform import Transform2D
+from ...errors import InputError
+from ...grid import OCCUPIED, UNKNOWN, OccupancyGrid
+from ...resample import resample
+from ...transform import Transform2D
 
 __all__ = [
     "PairEstimate", "prepare_pair", "cell_to_map", "map_to_cell", "make_options",

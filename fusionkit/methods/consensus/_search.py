@@ -25,7 +25,7 @@ import numpy as np
 from scipy import fft as sfft
 from scipy import ndimage
 
-from ..transform import Transform2D
+from ...transform import Transform2D
 from ._index import MapIndex
 
 __all__ = ["orientation_histogram", "rotation_candidates", "EvidenceRaster", "evidence_raster",

@@ -40,9 +40,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..errors import InputError
-from ..grid import OCCUPIED, OccupancyGrid
-from ..transform import Transform2D
+from ...errors import InputError
+from ...grid import OCCUPIED, OccupancyGrid
+from ...transform import Transform2D
 from ._common import PairEstimate, Stopwatch, cell_to_map, make_options, prepare_pair
 
 __all__ = ["FourierMellinOptions", "estimate_pair", "highpass_emphasis", "log_polar_magnitude",

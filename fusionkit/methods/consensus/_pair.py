@@ -9,9 +9,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..alignment import make_field
-from ..errors import InputError
-from ..transform import Transform2D
+from ...alignment import make_field
+from ...errors import InputError
+from ...transform import Transform2D
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, rotation_candidates
@@ -27,7 +27,7 @@ class ConsensusConfig:
     Attributes
     ----------
     accept : float
-        Least verification score (:class:`~fusionkit.consensus.Check`, 0..1) for a placement.
+        Least verification score (:class:`~fusionkit.methods.consensus.Check`, 0..1) for a placement.
     min_overlap_cells : int
         Least number of wall cells of each map that must land where the other map is known.
     min_overlap_fraction : float

@@ -12,10 +12,10 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .._jit import njit
-from ..grid import OccupancyGrid
-from ..scanlog import ScanLog
-from ..unique_poses import scan_spectra
+from ..._jit import njit
+from ...grid import OccupancyGrid
+from ...scanlog import ScanLog
+from ...unique_poses import scan_spectra
 
 __all__ = ["MapIndex", "index_map", "spread_indices", "first_per_cell"]
 

@@ -48,9 +48,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import InputError
-from ..grid import OccupancyGrid
-from ..transform import Transform2D
+from ...errors import InputError
+from ...grid import OccupancyGrid
+from ...transform import Transform2D
 from ._common import (PairEstimate, Stopwatch, acceptance_index, cell_to_map, make_options,
                       occupied_cell_centres, prepare_pair, warp_cells)
 

@@ -1,0 +1,211 @@
+"""The paper's method (``"spectral-pso"``): the placement part of its Fig. 1.
+
+1. every map gets its scans (its ``.scans.npz``, or virtual scans cast in its free space);
+2. unique poses by the DFT of the scans (Algorithm 1, eq. 1, :mod:`fusionkit.unique_poses`);
+3. agreement between every two robots' unique poses and the fusion order (eq. 2,
+   :mod:`fusionkit.pairing`);
+4. for each step of the order, the alignment by PSO on the masks' MSE (eqs. 3-4,
+   :mod:`fusionkit.alignment`, :mod:`fusionkit.pso`), checked against the maps already fused: a
+   map that does not fit with confidence is left out, never forced.
+
+The fusion of every placed map into the reference frame (Section 3.6, :mod:`fusionkit.fusion`)
+is :func:`fusionkit.pipeline.merge`'s, as for every method.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ..alignment import (AlignmentConfig, align_points, mask_points, overlap_score, refine_points,
+                         seed_transforms)
+from ..errors import InputError
+from ..fusion import fuse_maps
+from ..pairing import PairAgreement, agreement, fusion_order
+from ..pso import PSOState
+from ..transform import Transform2D
+from ..unique_poses import find_unique_poses
+from .base import MergeEvent, MergeStep, MethodResult, Placement, PreparedMaps
+
+__all__ = ["SPECTRAL_PSO", "SpectralPSOSettings", "SpectralPSO"]
+
+SPECTRAL_PSO = "spectral-pso"
+
+
+@dataclass(frozen=True)
+class SpectralPSOSettings:
+    """The paper's method's settings (their meaning: :class:`fusionkit.pipeline.MergeConfig`)."""
+
+    sub_sec: int = 5
+    delta: float | None = None
+    unique_count: int = 200
+    theta: float = 0.9
+    alignment: AlignmentConfig = AlignmentConfig()
+    accept: float = 0.7
+    min_overlap_cells: int = 50
+    refine: bool = True
+    virtual_poses: int = 1500
+    seed: int = 0
+
+
+class SpectralPSO:
+    """The paper's method: unique poses, Pearson pairing, PSO alignment."""
+
+    name = SPECTRAL_PSO
+
+    def settings(self, config) -> SpectralPSOSettings:
+        return SpectralPSOSettings(config.sub_sec, config.delta, config.unique_count, config.theta,
+                                   config.alignment, config.accept, config.min_overlap_cells,
+                                   config.refine, config.virtual_poses, config.seed)
+
+    def place(self, maps: PreparedMaps, config: SpectralPSOSettings, emit) -> MethodResult:
+        """Place the maps by steps 1-4 of the paper's Fig. 1."""
+        grids, scans, names = maps.grids, maps.scans, maps.names
+        seconds: dict = {}
+
+        # 1. scans: recorded, or cast virtually in the map's free space
+        t0 = time.perf_counter()
+        from ..virtual_scans import virtual_scans
+        logs, virtual = [], []
+        for k, (g, s) in enumerate(zip(grids, scans)):
+            emit(MergeEvent("scans", k, len(grids), names[k]))
+            if s is None:
+                s = virtual_scans(g, n_poses=config.virtual_poses, seed=config.seed + k)
+                virtual.append(True)
+            else:
+                virtual.append(False)
+            logs.append(s)
+        beams = {s.n_beams for s in logs}
+        if len(beams) > 1:
+            raise InputError(f"the maps' scans have different beam counts {sorted(beams)}; spectra can "
+                             "only be compared between scans of the same beam count")
+        seconds["scans"] = time.perf_counter() - t0
+
+        # 2. unique poses (Algorithm 1)
+        t0 = time.perf_counter()
+        unique = []
+        for k, s in enumerate(logs):
+            emit(MergeEvent("unique_poses", k, len(logs), names[k]))
+            try:
+                unique.append(find_unique_poses(s, sub_sec=config.sub_sec, delta=config.delta,
+                                                target=config.unique_count))
+            except InputError as exc:
+                raise InputError(f"{names[k]}: {exc}") from None
+        seconds["unique_poses"] = time.perf_counter() - t0
+
+        # 3. agreement and fusion order (eq. 2)
+        t0 = time.perf_counter()
+        n = len(grids)
+        counts = np.zeros((n, n), int)
+        agreements: dict = {}
+        for a in range(n):
+            for b in range(a + 1, n):
+                emit(MergeEvent("pairing", len(agreements), n * (n - 1) // 2, f"{names[a]} ~ {names[b]}"))
+                ag = agreement(unique[a].unique_spectra, unique[b].unique_spectra, config.theta, a=a, b=b)
+                agreements[(a, b)] = ag
+                counts[a, b] = counts[b, a] = ag.count
+        plan = fusion_order(counts)
+        seconds["pairing"] = time.perf_counter() - t0
+
+        # 4. alignment, step by step, each checked against what is already fused
+        t0 = time.perf_counter()
+        rng = np.random.default_rng(config.seed)
+        res = grids[maps.reference].resolution
+        transforms: list = [None] * n
+        confidence = [0.0] * n
+        overlap = [0] * n
+        reasons = [""] * n
+        steps: list[MergeStep] = []
+        accepted_order: list = []
+        if plan.steps:
+            first = plan.steps[0][0]
+            transforms[first] = Transform2D.identity()
+            confidence[first] = 1.0
+        for si, (anchor, new) in enumerate(plan.steps):
+            placed = [k for k in range(n) if transforms[k] is not None]
+            ref_pts, mov_idx, seeds = [], set(), []
+            for p in placed:
+                ag = _pair(agreements, p, new)
+                if ag.count == 0:
+                    continue
+                up, un = unique[p].indices, unique[new].indices
+                matched_p = up[np.unique(ag.matches[:, 0])]
+                ref_pts.append(transforms[p](mask_points(logs[p], matched_p)))
+                mov_idx.update(un[np.unique(ag.matches[:, 1])].tolist())
+                if config.alignment.seeded:
+                    pairs = [(up[i], un[j]) for i, j in ag.matches[: config.alignment.max_seeds]]
+                    seeds += [(ag_rho, transforms[p] @ t) for ag_rho, t in
+                              zip(ag.rho[ag.matches[:, 0], ag.matches[:, 1]][: len(pairs)],
+                                  seed_transforms(logs[p], logs[new], pairs))]
+            seeds.sort(key=lambda st: -st[0])
+            label = f"{names[new]} -> {names[anchor]}"
+
+            def pso_cb(state: PSOState, _si=si, _label=label, _pair=(anchor, new)):
+                emit(MergeEvent("align", _si, len(plan.steps), _label, _pair, state))
+
+            emit(MergeEvent("align", si, len(plan.steps), label, (anchor, new)))
+            mov_pts = mask_points(logs[new], sorted(mov_idx))
+            if not ref_pts or len(mov_pts) == 0:
+                steps.append(MergeStep(anchor, new, None, None, 0.0, 0, False, 0))
+                reasons[new] = "no matched scan end points to align"
+                continue
+            al = align_points(np.concatenate(ref_pts), mov_pts, res, config=config.alignment,
+                              seeds=[t for _, t in seeds], seed=rng, callback=pso_cb)
+            fused_now = fuse_maps([grids[k] for k in placed], [transforms[k] for k in placed]).grid
+            if config.refine:
+                fine = refine_points(fused_now.occupied_points(), grids[new].occupied_points(),
+                                     al.transform, res, config=config.alignment, seed=rng,
+                                     callback=pso_cb)
+                al = replace(al, transform=fine.transform, params=fine.params, cost=fine.cost,
+                             refinement=fine.pso)
+            score, cells = overlap_score(fused_now, grids[new], al.transform)
+            ok = score >= config.accept and cells >= config.min_overlap_cells
+            steps.append(MergeStep(anchor, new, al, al.transform, score, cells, ok,
+                                   int(_pair(agreements, anchor, new).count)))
+            confidence[new], overlap[new] = score, cells
+            if ok:
+                transforms[new] = al.transform
+                accepted_order.append((anchor, new))
+            else:
+                reasons[new] = (f"best alignment agrees on {100 * score:.0f}% of {cells} overlapping "
+                                f"wall cells (needs {100 * config.accept:.0f}% of >= {config.min_overlap_cells})")
+        seconds["align"] = time.perf_counter() - t0
+
+        # express everything in the reference map's frame
+        ref = maps.reference
+        if transforms[ref] is None:
+            # the reference was not placed with the others: it stands alone, the rest is not merged
+            transforms = [None] * n
+            transforms[ref] = Transform2D.identity()
+            confidence = [0.0] * n
+            accepted_order = []
+            for k in range(n):
+                if k != ref:
+                    reasons[k] = reasons[k] or "no confident link to the reference map"
+        else:
+            to_ref = transforms[ref].inverse
+            transforms = [None if t is None else to_ref @ t for t in transforms]
+        confidence[ref] = 1.0
+        for k in plan.unplaced:
+            reasons[k] = reasons[k] or "its unique poses agree with none of the placed maps"
+
+        # the fusion order: the accepted steps', the reference first when no step was accepted
+        order = [accepted_order[0][0]] + [k for _, k in accepted_order] if accepted_order else []
+        if ref not in order:
+            order.insert(0, ref)
+        placements = tuple(Placement(transforms[k], float(confidence[k]),
+                                     "" if transforms[k] is not None else reasons[k], int(overlap[k]))
+                           for k in range(n))
+        return MethodResult(placements, tuple(accepted_order), tuple(order), plan, tuple(steps),
+                            tuple(logs), tuple(virtual), tuple(unique), agreements, seconds)
+
+
+def _pair(agreements: dict, a: int, b: int) -> PairAgreement:
+    """The agreement of maps a and b with a's unique poses first."""
+    if a < b:
+        return agreements[(a, b)]
+    ag = agreements[(b, a)]
+    m = ag.matches[:, ::-1] if ag.count else ag.matches
+    return PairAgreement(a, b, ag.rho.T, np.ascontiguousarray(m), ag.count)
