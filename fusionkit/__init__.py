@@ -4,10 +4,17 @@ The paper's method, "Map Fusion for Precise Yet Efficient Collaborative SLAM" (`
 "spectral-pso"``): unique poses by the DFT of the scans (Algorithm 1), the fusion order by
 Pearson correlation of their spectra (eq. 2), the alignment by Particle Swarm Optimization of a
 mask MSE (eq. 3), then transform (eq. 4) and fusion (Section 3.6), measured by the paper's
-Table 1 metrics. The default method, ``"consensus"`` (:mod:`fusionkit.methods.consensus`), builds on
-it: placements from every scan and from the walls, each verified on the whole maps, kept
-consistent over all maps, and refused when not sure. The classic peers are in
+Table 1 metrics. The default method, ``"consensus"`` (:mod:`fusionkit.methods.consensus`),
+builds on it: placements from every scan and from the walls, each verified on the whole maps,
+kept consistent over all maps, and refused when not sure. The classic peers are in
 :mod:`fusionkit.methods.peers`.
+
+The paper's Fig. 1 in modules (``fusionkit/README.md`` has the whole map): unique poses, eq. 1
+:mod:`fusionkit.unique_poses`; pairing, eq. 2 :mod:`fusionkit.pairing`; the eq. 3 objective
+:mod:`fusionkit.alignment` (swarm: :mod:`fusionkit.pso`); the eq. 4 transform
+:mod:`fusionkit.transform` and :mod:`fusionkit.resample`; fusion (3.6) :mod:`fusionkit.fusion`;
+Table 1 :mod:`fusionkit.metrics`. :func:`merge` (:mod:`fusionkit.pipeline`) runs a method of
+:mod:`fusionkit.methods` (the paper's: :mod:`fusionkit.methods.paper`) and fuses its placements.
 
 Quick start::
 
