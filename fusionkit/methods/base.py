@@ -80,7 +80,8 @@ class PreparedMaps:
 @dataclass(frozen=True)
 class Placement:
     """Where a method put one map: ``transform`` maps its frame into the reference frame
-    (None: left out, with the ``reason``); ``confidence`` in [0, 1]; ``overlap_cells`` the
+    (None: left out, with the ``reason``); ``confidence`` >= 0, the method's own score (1 for
+    the reference; in [0, 1] but for map-merge's inlier ratio); ``overlap_cells`` the
     overlap the confidence was measured on."""
 
     transform: Transform2D | None

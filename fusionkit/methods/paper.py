@@ -15,12 +15,11 @@ is :func:`fusionkit.pipeline.merge`'s, as for every method.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
-from ..alignment import (AlignmentConfig, align_points, mask_points, overlap_score, refine_points,
-                         seed_transforms)
+from ..alignment import align_points, mask_points, overlap_score, refine_points, seed_transforms
 from ..errors import InputError
 from ..fusion import fuse_maps
 from ..pairing import PairAgreement, agreement, fusion_order
@@ -29,25 +28,9 @@ from ..transform import Transform2D
 from ..unique_poses import find_unique_poses
 from .base import MergeEvent, MergeStep, MethodResult, Placement, PreparedMaps
 
-__all__ = ["SPECTRAL_PSO", "SpectralPSOSettings", "SpectralPSO"]
+__all__ = ["SPECTRAL_PSO", "SpectralPSO"]
 
 SPECTRAL_PSO = "spectral-pso"
-
-
-@dataclass(frozen=True)
-class SpectralPSOSettings:
-    """The paper's method's settings (their meaning: :class:`fusionkit.pipeline.MergeConfig`)."""
-
-    sub_sec: int = 5
-    delta: float | None = None
-    unique_count: int = 200
-    theta: float = 0.9
-    alignment: AlignmentConfig = AlignmentConfig()
-    accept: float = 0.7
-    min_overlap_cells: int = 50
-    refine: bool = True
-    virtual_poses: int = 1500
-    seed: int = 0
 
 
 class SpectralPSO:
@@ -55,13 +38,14 @@ class SpectralPSO:
 
     name = SPECTRAL_PSO
 
-    def settings(self, config) -> SpectralPSOSettings:
-        return SpectralPSOSettings(config.sub_sec, config.delta, config.unique_count, config.theta,
-                                   config.alignment, config.accept, config.min_overlap_cells,
-                                   config.refine, config.virtual_poses, config.seed)
+    def settings(self, config):
+        """The :class:`~fusionkit.pipeline.MergeConfig` itself: its fields are this method's
+        settings (``sub_sec``, ``delta``, ``unique_count``, ``theta``, ``alignment``, ``accept``,
+        ``min_overlap_cells``, ``refine``, ``virtual_poses``, ``seed``)."""
+        return config
 
-    def place(self, maps: PreparedMaps, config: SpectralPSOSettings, emit) -> MethodResult:
-        """Place the maps by steps 1-4 of the paper's Fig. 1."""
+    def place(self, maps: PreparedMaps, config, emit) -> MethodResult:
+        """Place the maps by steps 1-4 of the paper's Fig. 1 (``config``: :meth:`settings`)."""
         grids, scans, names = maps.grids, maps.scans, maps.names
         seconds: dict = {}
 

@@ -1,0 +1,60 @@
+"""Every merging method behind one interface: the registry, what a method gives back, and that
+merge() builds its result from it."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit.errors import InputError
+from fusionkit.mapio import load_map
+from fusionkit.methods import METHODS, get_method
+from fusionkit.methods.base import MethodResult, PreparedMaps
+from fusionkit.methods.peers import crop_pair
+from fusionkit.pipeline import MergeConfig, merge
+from fusionkit.transform import Transform2D
+
+REAL = Path(__file__).parent.parent / "maps" / "real"
+
+
+@pytest.fixture(scope="module")
+def maps():
+    """Two overlapping windows of the Intel lab, the second turned and moved into its own frame."""
+    intel = load_map(REAL / "intel_lab.yaml")
+    pair = crop_pair(intel, np.random.default_rng(3), size=200, min_overlap=0.4)
+    return [pair.a, pair.b]
+
+
+def test_registry_names_every_method_and_refuses_an_unknown_one():
+    assert set(METHODS) == {"spectral-pso", "consensus", "map-merge", "map-merge-shipped",
+                            "hough-spectrum", "fourier-mellin"}
+    assert [get_method(m).name for m in METHODS] == list(METHODS)
+    with pytest.raises(InputError, match="unknown method 'icp'"):
+        get_method("icp")
+
+
+@pytest.mark.parametrize("name", METHODS)
+def test_a_method_places_each_map_or_says_why_not_and_merge_fuses_what_it_placed(name, maps):
+    method = get_method(name)
+    config = MergeConfig(method=name, reference=1, seed=2)
+    events = []
+    out = method.place(PreparedMaps(tuple(maps), (None, None), ("a", "b"), 1),
+                       method.settings(config), events.append)
+    assert isinstance(out, MethodResult) and len(out.placements) == 2
+    ref = out.placements[1]
+    assert ref.transform.is_close(Transform2D.identity()) and ref.confidence == 1.0
+    # a map is in the fusion order exactly when it is placed; one left out says why
+    assert 1 in out.order
+    assert all((k in out.order) == (p.transform is not None) for k, p in enumerate(out.placements))
+    assert all(bool(p.reason) == (p.transform is None) for p in out.placements)
+    assert all(p.confidence >= 0.0 for p in out.placements)
+    assert events and all(ev.stage in ("scans", "unique_poses", "pairing", "align") for ev in events)
+
+    result = merge(maps, config=config)
+    assert [p.merged for p in result.placements] == [p.transform is not None for p in out.placements]
+    assert result.order == out.order and result.fusion_order == out.links
+    for got, want in zip(result.placements, out.placements):
+        assert got.confidence == want.confidence and got.reason == (want.reason if not got.merged else "")
+        if want.transform is not None:
+            assert got.transform.is_close(want.transform)
+    assert set(result.seconds) >= {"fuse", "total"}
