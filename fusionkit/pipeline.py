@@ -39,6 +39,7 @@ from .transform import Transform2D
 __all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MergeStep", "MergeResult", "MergeCancelled",
            "merge", "METHODS", "load_inputs"]
 
+
 class MergeCancelled(FusionkitError):
     """The callback asked the merge to stop."""
 
@@ -51,8 +52,8 @@ class MergeConfig:
     ----------
     method : str
         ``"consensus"`` (default): verified hypotheses from scans and walls, kept consistent
-        over all maps, refused when unsure (:mod:`fusionkit.methods.consensus`; ahead of the paper's
-        method and the peers in ``fusionkit bench``, see BENCHMARKS.md); ``"spectral-pso"``:
+        over all maps, refused when unsure (:mod:`fusionkit.methods.consensus`; ahead of the
+        paper's method and the peers in ``fusionkit bench``, see BENCHMARKS.md); ``"spectral-pso"``:
         the paper's method (unique poses, Pearson pairing, PSO; what ``fusionkit run`` and the
         notebooks reproduce); ``"map-merge"``, ``"map-merge-shipped"``, ``"hough-spectrum"``,
         ``"fourier-mellin"``: the classic peers (:mod:`fusionkit.methods.peers`). The settings
