@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
-from .grids import (_imshow_rgb, _legend_patches, _new_figure, owner_image, plot_grid,
-                    robot_colour, state_legend, _TINT)
+from .grids import (_SHADE_FREE, _SHADE_OCCUPIED, _SHADE_UNKNOWN, _TINT, _imshow_rgb,
+                    _legend_patches, _new_figure, owner_image, plot_grid, robot_colour,
+                    state_legend)
 
 __all__ = ["plot_fused", "plot_merge", "plot_cells", "plot_cell_fusion", "plot_fusion_steps",
            "plot_table1"]
