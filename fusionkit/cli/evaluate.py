@@ -15,9 +15,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError
+from ..labels import clip_left
 from ..transform import Transform2D
 
-__all__ = ["register", "run", "Truth", "read_truth", "find_report", "read_report", "evaluate_files"]
+__all__ = ["register", "run", "Truth", "read_truth", "robot_of", "find_report", "read_report", "evaluate_files"]
 
 
 def register(sub) -> None:
@@ -148,8 +149,51 @@ def find_report(merged, report=None) -> Path | None:
     return None
 
 
-def _robot(path_text: str) -> str:
-    return Path(path_text).stem
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and a.samefile(b)
+    except OSError:
+        return False
+
+
+def robot_of(truth: Truth, path_text: str, *, bases=(), others=()) -> str:
+    """The robot of ``truth`` whose map is the file ``path_text``, matched by path.
+
+    A robot ``NAME`` of a truth.json is the map ``NAME.yaml`` beside it (the layout ``fusionkit
+    simulate`` writes). ``path_text`` is a map's path as a merge report gives it: relative to
+    the directory the merge was run in, tried from the current directory and from each of
+    ``bases``. When the file is found, it must be one of the truth's robot maps: two runs both
+    have a ``robot_1.yaml``, and a map of another run has no true transform here. When it is
+    found nowhere (the maps were moved), the file name decides, unless another map of
+    ``others`` has the same name.
+
+    Raises
+    ------
+    InputError
+        The map is another run's, or is named like no robot of the truth file, or cannot be told
+        apart from another map of the same name.
+    """
+    given = Path(path_text)
+    candidates = [given] if given.is_absolute() else [given, *(Path(b) / given for b in bases)]
+    found = next((c for c in candidates if c.is_file()), None)
+    robots = ", ".join(truth.robots)
+    if found is not None:
+        for name in truth.robots:
+            for ext in (".yaml", ".yml"):
+                if _same_file(found, truth.path.parent / (name + ext)):
+                    return name
+        raise InputError(f"map {path_text} ({found.resolve()}) is not in the run of {truth.path}: its "
+                         f"robots ({robots}) are the robot maps beside it; give the truth.json of "
+                         f"the run this map came from")
+    name = given.stem
+    if any(Path(o).stem == name and o != path_text for o in others):
+        raise InputError(f"map {path_text}: cannot be told apart from another map named {given.name} "
+                         f"(neither file is found from here); run evaluate from the directory the "
+                         f"merge was run in")
+    if name not in truth.robots:
+        raise InputError(f"map {path_text} is robot {name!r}, which is not in {truth.path} "
+                         f"(robots: {robots}); give the matching truth file")
+    return name
 
 
 def read_report(path, merged) -> dict:
@@ -206,13 +250,15 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
     robots = truth_info.robots
 
     if rep is not None:
-        ref = _robot(rep["reference"])
+        bases = (report_path.parent,)
+        inputs = [m["input"] for m in rep["maps"]]
+        try:
+            ref = robot_of(truth_info, rep["reference"], bases=bases, others=inputs)
+        except InputError as exc:
+            raise InputError(f"{report_path}: the reference: {exc}") from None
         if reference is not None and reference != ref:
             raise InputError(f"--reference {reference} disagrees with the report {report_path}, "
                              f"whose reference is {rep['reference']} ({ref}); drop --reference")
-        if ref not in robots:
-            raise InputError(f"{report_path}: the reference {rep['reference']} is robot {ref!r}, "
-                             f"which is not in {truth_info.path} (robots: {', '.join(robots)})")
     else:
         ref = reference if reference is not None else next(iter(robots))
         if ref not in robots:
@@ -226,11 +272,10 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
 
     rows = []
     for m in rep["maps"] if rep is not None else []:
-        name = _robot(m["input"])
-        if name not in robots:
-            raise InputError(f"{report_path}: map {m['input']} is robot {name!r}, which is not in "
-                             f"{truth_info.path} (robots: {', '.join(robots)}); give the matching "
-                             f"truth file")
+        try:
+            name = robot_of(truth_info, m["input"], bases=bases, others=inputs)
+        except InputError as exc:
+            raise InputError(f"{report_path}: {exc}") from None
         true_rel = t_ref.inverse @ robots[name]
         est = m["transform"]
         err = transform_errors(est, true_rel, fused.resolution).as_dict() if est is not None else None
@@ -267,14 +312,15 @@ def format_evaluation(result: dict) -> str:
     lines += ["", f"per map (report {result['report']}); transforms into the merged frame:",
               f"  {'map':<24} {'merged':<6} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'th (deg)':>8}"
               f" {'true x':>8} {'true y':>8} {'true th':>8} {'err (m)':>8} {'cells':>6} {'deg':>6}"]
-    for r in result["maps"]:
+    labels = [clip_left(r["input"], 24) for r in result["maps"]]
+    for k, r in enumerate(result["maps"]):
         t, tt, e = r["transform"], r["true_transform"], r["error"]
         conf = f"{r['confidence']:5.2f}" if r["confidence"] is not None else f"{'-':>5}"
         est = (f"{t['x']:8.2f} {t['y']:8.2f} {math.degrees(t['theta']):8.1f}" if t is not None
                else f"{'-':>8} {'-':>8} {'-':>8}")
         err = (f"{e['translation_m']:8.3f} {e['translation_cells']:6.1f} {e['rotation_deg']:6.2f}"
                if e is not None else f"{'-':>8} {'-':>6} {'-':>6}")
-        lines.append(f"  {r['input'][-24:]:<24} {'yes' if r['merged'] else 'no':<6} {conf} {est} "
+        lines.append(f"  {labels[k]:<24} {'yes' if r['merged'] else 'no':<6} {conf} {est} "
                      f"{tt['x']:8.2f} {tt['y']:8.2f} {math.degrees(tt['theta']):8.1f} {err}")
     return "\n".join(lines)
 
