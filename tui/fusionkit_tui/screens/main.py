@@ -119,7 +119,7 @@ class MainScreen(Screen):
     def check_action(self, action: str, parameters: tuple) -> bool | None:
         typing = self._typing()
         if action == "cancel":
-            return True if self.merging else None
+            return True if self.merging else False  # shown only while there is a run to cancel
         if action == "run":
             # while a field is typed into, r is a letter: the footer offers ctrl+r instead
             return False if typing else None if self.merging else True
@@ -296,7 +296,7 @@ class MainScreen(Screen):
         self.merging = False
         self.run_panel.stopped(f"cancelled{self._earlier()}")
         if self.result is not None:
-            self.last_run_outcome = "cancelled"
+            self.last_run_outcome = "was cancelled"
             self.result_panel.mark_earlier(f"the last run was cancelled; this is the merge of "
                                            f"{self.result_time}")
 

@@ -141,7 +141,7 @@ class SettingsForm(VerticalScroll, can_focus=True):
 
     BINDINGS = [
         Binding("escape", "leave_field", "Done"),
-        Binding("ctrl+r", "screen.run_anywhere", "Run"),
+        Binding("ctrl+r", "run_from_field", "Run"),
     ]
 
     DEFAULT_CSS = """
@@ -219,9 +219,12 @@ class SettingsForm(VerticalScroll, can_focus=True):
 
     def check_action(self, action: str, parameters: tuple) -> bool | None:
         # only while a field is typed into; otherwise escape and ctrl+r are the screen's
-        if action in ("leave_field", "screen.run_anywhere", "run_anywhere"):
+        if action in ("leave_field", "run_from_field"):
             return self._field() is not None
         return True
+
+    def action_run_from_field(self) -> None:
+        self.screen.action_run()
 
     def action_leave_field(self) -> None:
         """Give the keys back to the app (the value is checked as the field loses focus)."""
