@@ -1,9 +1,9 @@
 """``fusionkit evaluate``: score a merged map against the simulation's ground truth.
 
-The merged map is in the frame of the merge's reference map (CONTRACTS section 4); truth.json
-(CONTRACTS section 5) gives every robot's transform into the world map's frame, so the merged
+The merged map is in the frame of the merge's reference map; truth.json gives every robot's
+transform into the world map's frame (docs/formats.md has both formats), so the merged
 map is placed in the world frame by the reference robot's transform and scored with the
-metrics of CONTRACTS section 7. With the merge report (CONTRACTS section 6), each map's
+metrics of docs/formats.md. With the merge report, each map's
 estimated transform is also compared with the true one, ``inv(T_ref) @ T_k``.
 """
 
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
@@ -27,8 +27,10 @@ def register(sub) -> None:
         description="Place MERGED.yaml in the world frame of truth.json and print the paper's "
                     "Table 1 metrics in percent (completeness, accuracy, precision, efficiency, "
                     "and the precision with a one-cell tolerance). When the merge report is "
-                    "found, also print each map's transform error against the truth. "
-                    "Exit status: 0 done, 2 bad input.")
+                    "found, also print each map's transform error against the truth; maps are "
+                    "matched to truth.json's robots by path (robot NAME is the NAME.yaml beside "
+                    "truth.json), so a map of another run is refused, not scored against this "
+                    "one. Formats and metrics: docs/formats.md. Exit status: 0 done, 2 bad input.")
     p.add_argument("merged", metavar="MERGED.yaml", help="the merged map (map_server YAML)")
     p.add_argument("--truth", required=True, metavar="truth.json",
                    help="ground truth written by 'fusionkit simulate': the world map (its path "
@@ -61,11 +63,15 @@ class Truth:
         The world map YAML, resolved.
     robots : dict[str, Transform2D]
         Robot name -> transform of its map frame into the world frame, in file order.
+    maps : dict[str, Path]
+        Robot name -> its map file: the robot's ``map`` (relative to truth.json's directory),
+        else ``NAME.yaml`` beside truth.json.
     """
 
     path: Path
     world: Path
     robots: dict
+    maps: dict = field(default_factory=dict)
 
 
 def _read_json(path: Path, what: str):
@@ -85,7 +91,7 @@ def _read_json(path: Path, what: str):
 
 
 def read_truth(path) -> Truth:
-    """Read and check a truth.json (CONTRACTS section 5).
+    """Read and check a truth.json (docs/formats.md).
 
     Raises
     ------
@@ -105,6 +111,7 @@ def read_truth(path) -> Truth:
         raise InputError(f"{path}: 'robots' must be a non-empty list of {{name, transform}}; "
                          f"this truth file has no robots")
     robots: dict[str, Transform2D] = {}
+    maps: dict[str, Path] = {}
     for i, r in enumerate(robots_doc):
         name = r.get("name") if isinstance(r, dict) else None
         if not isinstance(name, str) or not name:
@@ -116,6 +123,8 @@ def read_truth(path) -> Truth:
         except ValueError:
             raise InputError(f"{path}: robot {name!r} needs a 'transform' with numeric x, y, "
                              f"theta, got {r.get('transform')!r}") from None
+        m = r.get("map")
+        maps[name] = path.parent / (m if isinstance(m, str) and m.strip() else f"{name}.yaml")
     world_path = Path(world.strip())
     if not world_path.is_absolute():
         beside = path.parent / world_path
@@ -123,7 +132,7 @@ def read_truth(path) -> Truth:
     if not world_path.exists():
         raise InputError(f"{path}: the world map {world!r} was not found beside the truth file "
                          f"or in the current directory; fix 'world' or restore the map")
-    return Truth(path=path, world=world_path, robots=robots)
+    return Truth(path=path, world=world_path, robots=robots, maps=maps)
 
 
 def _names_merged(report: dict, merged: Path) -> bool:
@@ -159,8 +168,8 @@ def _same_file(a: Path, b: Path) -> bool:
 def robot_of(truth: Truth, path_text: str, *, bases=(), others=()) -> str:
     """The robot of ``truth`` whose map is the file ``path_text``, matched by path.
 
-    A robot ``NAME`` of a truth.json is the map ``NAME.yaml`` beside it (the layout ``fusionkit
-    simulate`` writes). ``path_text`` is a map's path as a merge report gives it: relative to
+    A robot of a truth.json is the map its ``map`` names, else ``NAME.yaml`` beside truth.json
+    (the layout ``fusionkit simulate`` writes). ``path_text`` is a map's path as a merge report gives it: relative to
     the directory the merge was run in, tried from the current directory and from each of
     ``bases``. When the file is found, it must be one of the truth's robot maps: two runs both
     have a ``robot_1.yaml``, and a map of another run has no true transform here. When it is
@@ -179,9 +188,9 @@ def robot_of(truth: Truth, path_text: str, *, bases=(), others=()) -> str:
     robots = ", ".join(truth.robots)
     if found is not None:
         for name in truth.robots:
-            for ext in (".yaml", ".yml"):
-                if _same_file(found, truth.path.parent / (name + ext)):
-                    return name
+            mine = truth.maps.get(name, truth.path.parent / f"{name}.yaml")
+            if _same_file(found, mine):
+                return name
         raise InputError(f"map {path_text} ({found.resolve()}) is not in the run of {truth.path}: its "
                          f"robots ({robots}) are the robot maps beside it; give the truth.json of "
                          f"the run this map came from")
@@ -197,7 +206,7 @@ def robot_of(truth: Truth, path_text: str, *, bases=(), others=()) -> str:
 
 
 def read_report(path, merged) -> dict:
-    """Read and check a merge report (CONTRACTS section 6) that made ``merged``.
+    """Read and check a merge report (docs/formats.md) that made ``merged``.
 
     Returns the report with ``maps`` entries checked: ``input`` (str), ``merged`` (bool),
     ``confidence`` (number or None), ``transform`` (:class:`Transform2D` or None).
