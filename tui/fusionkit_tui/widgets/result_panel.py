@@ -117,9 +117,9 @@ class ResultPanel(Vertical):
             note.update(evaluation_error or "no truth.json beside the maps: no ground truth to score against")
             return
         metrics.display = True
-        note.update(f"against {evaluation.truth.name}, in {evaluation.reference}'s frame")
+        note.update(f"against {evaluation.truth}, in the frame of its {evaluation.reference}")
         metrics.add_columns("maps", "compl", "acc", "prec", "eff")
-        order = list(result.order)
+        order = list(result.fused.order)  # the maps in the fused map, in the order they were added
         for k, m in enumerate(evaluation.steps):
             # row k is the fused map after the (k+1)-th map of the fusion order was added
             label = (self._names[order[k]] if k == 0 else "+ " + self._names[order[k]]) \
