@@ -232,3 +232,42 @@ def test_help_explains_every_option(capsys):
     text = capsys.readouterr().out
     for opt in ("--truth", "--report", "--reference", "--json", "MERGED.yaml"):
         assert opt in text
+
+
+def test_maps_are_matched_to_the_truth_by_path_not_by_name(scene, capsys, monkeypatch):
+    """Two runs both have a robot_2.yaml: only the one beside truth.json gets its true transform."""
+    root, world, report = scene
+    for name, t in (("robot_1", T1), ("robot_2", T2)):
+        save_map(in_robot_frame(world, t), root / f"{name}.yaml")
+    (root / "other").mkdir()
+    save_map(in_robot_frame(world, T3), root / "other" / "robot_2.yaml")
+    monkeypatch.chdir(root)
+    code, out, err = run(["out/merged.yaml", "--truth", "truth.json", "--json"], capsys)
+    assert code == 0, err
+    rows = json.loads(out)["maps"]
+    assert [r["robot"] for r in rows] == ["robot_1", "robot_2", "robot_3"]
+    true_12 = (T1.inverse @ T2).as_dict()
+    assert rows[1]["true_transform"] == pytest.approx(true_12)
+    # the same report naming the other run's robot_2: refused, not scored against this run's
+    report["maps"][1]["input"] = "other/robot_2.yaml"
+    write(root / "out/merged.report.json", report)
+    code, out, err = run(["out/merged.yaml", "--truth", "truth.json", "--json"], capsys)
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and "other/robot_2.yaml" in err and "not in the run" in err
+    # from another directory the paths are found from the report's directory... or not at all:
+    # two maps of the same name that cannot be found cannot be told apart
+    report["maps"][2]["input"] = "elsewhere/robot_2.yaml"
+    report["maps"][1]["input"] = "gone/robot_2.yaml"
+    write(root / "out/merged.report.json", report)
+    code, out, err = run(["out/merged.yaml", "--truth", "truth.json"], capsys)
+    assert code == 2 and "cannot be told apart" in err
+
+
+def test_long_map_paths_are_cut_with_an_ellipsis(scene, capsys):
+    root, _, report = scene
+    report["maps"][1]["input"] = "some/very/long/directory/of/runs/robot_2.yaml"
+    write(root / "out/merged.report.json", report)
+    code, out, err = run([root / "out/merged.yaml", "--truth", root / "truth.json"], capsys)
+    assert code == 0, err
+    row = next(line for line in out.splitlines() if "robot_2.yaml" in line)
+    assert row.split()[0].startswith("…") and row.split()[0].endswith("runs/robot_2.yaml")

@@ -284,7 +284,8 @@ async def test_cancel_stops_the_merge_and_the_app_stays_usable(in_root):
         await until(pilot, lambda: not screen.merging)
         assert screen.result is None
         assert "cancelled" in str(screen.run_panel.query_one("#detail").render())
-        assert any("cancelled" in n.message for n in app._notifications)
+        # said on the run panel, not in a toast over the plot's axis
+        assert not any("cancelled" in n.message for n in app._notifications)
 
         # still usable: the next run completes
         await run_merge(pilot, {"particles": "40", **FAST})
@@ -336,15 +337,14 @@ async def test_a_broken_map_is_a_notification_not_a_crash(tmp_path, monkeypatch)
     async with app.run_test(size=(80, 24)) as pilot:
         screen = app.main
         await until(pilot, lambda: len(screen.query_one(MapTree).root.children) > 0)
-        assert screen.maps.selected == []
-        assert any(n.severity == "error" for n in app._notifications)
-        screen.maps.toggle(tmp_path / "maps" / "broken.yaml")
-        await pilot.pause()
-        assert screen.maps.selected == []
+        # listed, marked unreadable with the reason, and never merged
+        broken = Path("maps") / "broken.yaml"
+        assert screen.maps.selected == [broken] and list(screen.maps.unreadable) == [broken]
+        assert any(n.severity == "error" and "broken.yaml" in n.message for n in app._notifications)
         await pilot.press("r")
         await pilot.pause()
         assert not screen.merging
-        assert any("at least two maps" in n.message for n in app._notifications)
+        assert any("at least two readable maps" in n.message for n in app._notifications)
         await pilot.press("question_mark")
         await pilot.pause()
         assert isinstance(app.screen, HelpScreen)
@@ -399,3 +399,128 @@ def test_snapshot_export_dialog(in_root, snap_compare):
 def test_snapshot_help(in_root, snap_compare):
     assert snap_compare(make_app(["run"]), terminal_size=(80, 24),
                         run_before=_snapshot_ready(then="question_mark"))
+
+
+# -- keys, names, unreadable maps, earlier results ------------------------------------------------
+async def test_from_the_settings_tab_the_number_keys_switch_tabs_and_q_quits(in_root):
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        tabs = screen.query_one("TabbedContent")
+        theta = screen.query_one("#set-theta", Input)
+        before = theta.value
+        for key, tab in (("3", "run"), ("4", "result"), ("1", "maps"), ("2", "settings")):
+            await pilot.press("2")
+            assert tabs.active == "settings" and not isinstance(screen.focused, Input)
+            await pilot.press(key)
+            assert tabs.active == tab
+        assert theta.value == before  # no digit went into a field
+        # a field takes text once tabbed into (method first, then theta); r is then a letter
+        await pilot.press("tab", "tab")
+        assert screen.focused is theta
+        assert screen.check_action("run", ()) is False and screen.check_action("quit", ()) is False
+        await pilot.press("end", "5", "r")
+        assert theta.value == before + "5r" and not screen.merging
+        # leaving it checks the value: red, and said
+        await pilot.press("escape")
+        assert screen.focused is screen.settings
+        assert theta.has_class("-invalid")
+        assert any(n.severity == "error" and "theta" in n.message for n in app._notifications)
+        theta.value = before
+        await pilot.pause()
+        assert screen.check_action("run", ()) is True
+        await pilot.press("q")
+        await pilot.pause()
+    assert app.return_code == 0 and not app.is_running
+
+
+async def test_maps_of_two_runs_are_told_apart_by_path_and_scored_by_path(in_root):
+    import shutil
+
+    other = Path("copy")
+    if not other.exists():
+        other.mkdir()
+        for f in ("robot_1.yaml", "robot_1.pgm", "robot_1.scans.npz"):
+            shutil.copy(Path("run") / f, other / f)
+    app = make_app(["run/robot_1.yaml", "run/robot_2.yaml", "copy/robot_1.yaml"])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        table = screen.maps.query_one("#selected", DataTable)
+        assert [str(table.get_row_at(k)[1]) for k in range(3)] == ["run/robot_1", "robot_2", "copy/robot_1"]
+        await run_merge(pilot)
+        result = screen.result
+        assert [p.name for p in result.placements] == ["run/robot_1", "robot_2", "copy/robot_1"]
+        placements = screen.query_one("#placements", DataTable)
+        assert [str(placements.get_row_at(k)[0]) for k in range(3)] == ["run/robot_1", "robot_2", "copy/robot_1"]
+        # the copy is not a robot of run/truth.json: no true transform is borrowed for it
+        assert screen.evaluation is not None and screen.evaluation.errors[2] is None
+        assert screen.evaluation.errors[0] is not None  # the reference is run/truth.json's robot_1
+
+
+async def test_a_corrupt_map_is_shown_unreadable_and_left_out_of_the_run(in_root):
+    bad = Path("corrupt")
+    bad.mkdir(exist_ok=True)
+    (bad / "robot_9.yaml").write_text((Path("run") / "robot_1.yaml").read_text().replace("robot_1", "robot_9"))
+    image = (Path("run") / "robot_1.pgm").read_bytes()
+    (bad / "robot_9.pgm").write_bytes(image[: len(image) // 2])  # cut short
+    app = make_app(["run/robot_1.yaml", "run/robot_2.yaml", "corrupt/robot_9.yaml"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        await until(pilot, lambda: screen.maps.unreadable)
+        assert list(screen.maps.unreadable) == [bad / "robot_9.yaml"]
+        row = [str(c) for c in screen.maps.query_one("#selected", DataTable).get_row_at(2)]
+        assert row[0] == "✗" and row[2] == "unreadable"
+        assert any(n.severity == "error" and "robot_9" in n.message for n in app._notifications)
+        await run_merge(pilot)
+        assert screen.result is not None and len(screen.result.placements) == 2
+        assert any("left out" in (n.title or "") for n in app._notifications)
+
+
+async def test_after_a_cancelled_run_export_says_the_result_is_an_earlier_one(in_root):
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        await run_merge(pilot)
+        first = screen.result
+        await pilot.press("e")
+        await pilot.pause()
+        assert isinstance(app.screen, ExportScreen) and not app.screen.query("#export-note")
+        await pilot.press("escape")
+        await type_setting(pilot, "iterations", "100000")
+        await type_setting(pilot, "particles", "4000")
+        await pilot.press("ctrl+r")
+        await until(pilot, lambda: screen.run_panel.plot.series and screen.run_panel.plot.series[0][1])
+        bar = screen.run_panel.query_one("ProgressBar")
+        shown = bar.progress
+        await pilot.press("escape")
+        await until(pilot, lambda: not screen.merging)
+        assert bar.progress >= shown  # the bar stays where the run stopped
+        assert screen.result is first
+        await pilot.press("e")
+        await pilot.pause()
+        assert isinstance(app.screen, ExportScreen)
+        note = str(app.screen.query_one("#export-note").render())
+        assert "EARLIER" in note and "cancelled" in note
+
+
+async def test_m_shows_the_fused_map_on_the_whole_screen(in_root):
+    from fusionkit_tui.screens.map_view import MapScreen
+    from fusionkit_tui.widgets.map_preview import MapPreview
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        await run_merge(pilot)
+        small = screen.result_panel.query_one("#fused-map", MapPreview).size
+        await pilot.press("m")
+        await pilot.pause()
+        assert isinstance(app.screen, MapScreen)
+        big = app.screen.query_one(MapPreview).size
+        assert big.width == 80 and big.height >= 20 and big.width * big.height > 3 * small.width * small.height
+        await pilot.press("escape")
+        await pilot.pause()
+        assert not isinstance(app.screen, MapScreen)

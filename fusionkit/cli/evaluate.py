@@ -1,9 +1,9 @@
 """``fusionkit evaluate``: score a merged map against the simulation's ground truth.
 
-The merged map is in the frame of the merge's reference map (CONTRACTS section 4); truth.json
-(CONTRACTS section 5) gives every robot's transform into the world map's frame, so the merged
+The merged map is in the frame of the merge's reference map; truth.json gives every robot's
+transform into the world map's frame (docs/formats.md has both formats), so the merged
 map is placed in the world frame by the reference robot's transform and scored with the
-metrics of CONTRACTS section 7. With the merge report (CONTRACTS section 6), each map's
+metrics of docs/formats.md. With the merge report, each map's
 estimated transform is also compared with the true one, ``inv(T_ref) @ T_k``.
 """
 
@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import InputError
+from ..labels import clip_left
 from ..transform import Transform2D
 
-__all__ = ["register", "run", "Truth", "read_truth", "find_report", "read_report", "evaluate_files"]
+__all__ = ["register", "run", "Truth", "read_truth", "robot_of", "find_report", "read_report", "evaluate_files"]
 
 
 def register(sub) -> None:
@@ -26,8 +27,10 @@ def register(sub) -> None:
         description="Place MERGED.yaml in the world frame of truth.json and print the paper's "
                     "Table 1 metrics in percent (completeness, accuracy, precision, efficiency, "
                     "and the precision with a one-cell tolerance). When the merge report is "
-                    "found, also print each map's transform error against the truth. "
-                    "Exit status: 0 done, 2 bad input.")
+                    "found, also print each map's transform error against the truth; maps are "
+                    "matched to truth.json's robots by path (robot NAME is the NAME.yaml beside "
+                    "truth.json), so a map of another run is refused, not scored against this "
+                    "one. Formats and metrics: docs/formats.md. Exit status: 0 done, 2 bad input.")
     p.add_argument("merged", metavar="MERGED.yaml", help="the merged map (map_server YAML)")
     p.add_argument("--truth", required=True, metavar="truth.json",
                    help="ground truth written by 'fusionkit simulate': the world map (its path "
@@ -60,11 +63,15 @@ class Truth:
         The world map YAML, resolved.
     robots : dict[str, Transform2D]
         Robot name -> transform of its map frame into the world frame, in file order.
+    maps : dict[str, Path]
+        Robot name -> its map file: the robot's ``map`` (relative to truth.json's directory),
+        else ``NAME.yaml`` beside truth.json.
     """
 
     path: Path
     world: Path
     robots: dict
+    maps: dict = field(default_factory=dict)
 
 
 def _read_json(path: Path, what: str):
@@ -84,7 +91,7 @@ def _read_json(path: Path, what: str):
 
 
 def read_truth(path) -> Truth:
-    """Read and check a truth.json (CONTRACTS section 5).
+    """Read and check a truth.json (docs/formats.md).
 
     Raises
     ------
@@ -104,6 +111,7 @@ def read_truth(path) -> Truth:
         raise InputError(f"{path}: 'robots' must be a non-empty list of {{name, transform}}; "
                          f"this truth file has no robots")
     robots: dict[str, Transform2D] = {}
+    maps: dict[str, Path] = {}
     for i, r in enumerate(robots_doc):
         name = r.get("name") if isinstance(r, dict) else None
         if not isinstance(name, str) or not name:
@@ -115,6 +123,8 @@ def read_truth(path) -> Truth:
         except ValueError:
             raise InputError(f"{path}: robot {name!r} needs a 'transform' with numeric x, y, "
                              f"theta, got {r.get('transform')!r}") from None
+        m = r.get("map")
+        maps[name] = path.parent / (m if isinstance(m, str) and m.strip() else f"{name}.yaml")
     world_path = Path(world.strip())
     if not world_path.is_absolute():
         beside = path.parent / world_path
@@ -122,7 +132,7 @@ def read_truth(path) -> Truth:
     if not world_path.exists():
         raise InputError(f"{path}: the world map {world!r} was not found beside the truth file "
                          f"or in the current directory; fix 'world' or restore the map")
-    return Truth(path=path, world=world_path, robots=robots)
+    return Truth(path=path, world=world_path, robots=robots, maps=maps)
 
 
 def _names_merged(report: dict, merged: Path) -> bool:
@@ -148,12 +158,55 @@ def find_report(merged, report=None) -> Path | None:
     return None
 
 
-def _robot(path_text: str) -> str:
-    return Path(path_text).stem
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and a.samefile(b)
+    except OSError:
+        return False
+
+
+def robot_of(truth: Truth, path_text: str, *, bases=(), others=()) -> str:
+    """The robot of ``truth`` whose map is the file ``path_text``, matched by path.
+
+    A robot of a truth.json is the map its ``map`` names, else ``NAME.yaml`` beside truth.json
+    (the layout ``fusionkit simulate`` writes). ``path_text`` is a map's path as a merge report gives it: relative to
+    the directory the merge was run in, tried from the current directory and from each of
+    ``bases``. When the file is found, it must be one of the truth's robot maps: two runs both
+    have a ``robot_1.yaml``, and a map of another run has no true transform here. When it is
+    found nowhere (the maps were moved), the file name decides, unless another map of
+    ``others`` has the same name.
+
+    Raises
+    ------
+    InputError
+        The map is another run's, or is named like no robot of the truth file, or cannot be told
+        apart from another map of the same name.
+    """
+    given = Path(path_text)
+    candidates = [given] if given.is_absolute() else [given, *(Path(b) / given for b in bases)]
+    found = next((c for c in candidates if c.is_file()), None)
+    robots = ", ".join(truth.robots)
+    if found is not None:
+        for name in truth.robots:
+            mine = truth.maps.get(name, truth.path.parent / f"{name}.yaml")
+            if _same_file(found, mine):
+                return name
+        raise InputError(f"map {path_text} ({found.resolve()}) is not in the run of {truth.path}: its "
+                         f"robots ({robots}) are the robot maps beside it; give the truth.json of "
+                         f"the run this map came from")
+    name = given.stem
+    if any(Path(o).stem == name and o != path_text for o in others):
+        raise InputError(f"map {path_text}: cannot be told apart from another map named {given.name} "
+                         f"(neither file is found from here); run evaluate from the directory the "
+                         f"merge was run in")
+    if name not in truth.robots:
+        raise InputError(f"map {path_text} is robot {name!r}, which is not in {truth.path} "
+                         f"(robots: {robots}); give the matching truth file")
+    return name
 
 
 def read_report(path, merged) -> dict:
-    """Read and check a merge report (CONTRACTS section 6) that made ``merged``.
+    """Read and check a merge report (docs/formats.md) that made ``merged``.
 
     Returns the report with ``maps`` entries checked: ``input`` (str), ``merged`` (bool),
     ``confidence`` (number or None), ``transform`` (:class:`Transform2D` or None).
@@ -206,13 +259,15 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
     robots = truth_info.robots
 
     if rep is not None:
-        ref = _robot(rep["reference"])
+        bases = (report_path.parent,)
+        inputs = [m["input"] for m in rep["maps"]]
+        try:
+            ref = robot_of(truth_info, rep["reference"], bases=bases, others=inputs)
+        except InputError as exc:
+            raise InputError(f"{report_path}: the reference: {exc}") from None
         if reference is not None and reference != ref:
             raise InputError(f"--reference {reference} disagrees with the report {report_path}, "
                              f"whose reference is {rep['reference']} ({ref}); drop --reference")
-        if ref not in robots:
-            raise InputError(f"{report_path}: the reference {rep['reference']} is robot {ref!r}, "
-                             f"which is not in {truth_info.path} (robots: {', '.join(robots)})")
     else:
         ref = reference if reference is not None else next(iter(robots))
         if ref not in robots:
@@ -226,11 +281,10 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
 
     rows = []
     for m in rep["maps"] if rep is not None else []:
-        name = _robot(m["input"])
-        if name not in robots:
-            raise InputError(f"{report_path}: map {m['input']} is robot {name!r}, which is not in "
-                             f"{truth_info.path} (robots: {', '.join(robots)}); give the matching "
-                             f"truth file")
+        try:
+            name = robot_of(truth_info, m["input"], bases=bases, others=inputs)
+        except InputError as exc:
+            raise InputError(f"{report_path}: {exc}") from None
         true_rel = t_ref.inverse @ robots[name]
         est = m["transform"]
         err = transform_errors(est, true_rel, fused.resolution).as_dict() if est is not None else None
@@ -267,14 +321,15 @@ def format_evaluation(result: dict) -> str:
     lines += ["", f"per map (report {result['report']}); transforms into the merged frame:",
               f"  {'map':<24} {'merged':<6} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'th (deg)':>8}"
               f" {'true x':>8} {'true y':>8} {'true th':>8} {'err (m)':>8} {'cells':>6} {'deg':>6}"]
-    for r in result["maps"]:
+    labels = [clip_left(r["input"], 24) for r in result["maps"]]
+    for k, r in enumerate(result["maps"]):
         t, tt, e = r["transform"], r["true_transform"], r["error"]
         conf = f"{r['confidence']:5.2f}" if r["confidence"] is not None else f"{'-':>5}"
         est = (f"{t['x']:8.2f} {t['y']:8.2f} {math.degrees(t['theta']):8.1f}" if t is not None
                else f"{'-':>8} {'-':>8} {'-':>8}")
         err = (f"{e['translation_m']:8.3f} {e['translation_cells']:6.1f} {e['rotation_deg']:6.2f}"
                if e is not None else f"{'-':>8} {'-':>6} {'-':>6}")
-        lines.append(f"  {r['input'][-24:]:<24} {'yes' if r['merged'] else 'no':<6} {conf} {est} "
+        lines.append(f"  {labels[k]:<24} {'yes' if r['merged'] else 'no':<6} {conf} {est} "
                      f"{tt['x']:8.2f} {tt['y']:8.2f} {math.degrees(tt['theta']):8.1f} {err}")
     return "\n".join(lines)
 

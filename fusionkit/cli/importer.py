@@ -23,7 +23,7 @@ _RES_HELP = "map cell size in metres (default: %(default)s)"
 def register(sub) -> None:
     p = sub.add_parser(
         "import", help="convert a real robot log (CARMEN, ROS bag) into robot logs and maps",
-        description="Convert a real robot's laser log into NAME.scans.npz (CONTRACTS section 3) "
+        description="Convert a real robot's laser log into NAME.scans.npz (see docs/formats.md) "
                     "plus the map built from it (NAME.yaml + NAME.pgm), the poses in the "
                     "frame of the first scan. Exit status: 0 done, 2 bad input.")
     kinds = p.add_subparsers(dest="kind", metavar="KIND", required=True)

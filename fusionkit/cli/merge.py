@@ -1,4 +1,4 @@
-"""``fusionkit merge``: fuse robot maps into one (CONTRACTS section 6)."""
+"""``fusionkit merge``: fuse robot maps into one (report format: docs/formats.md)."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from pathlib import Path
 
 from .._atomic import check_not_input, write_text_atomic
 from ..errors import InputError
+from ..labels import clip_left
 from ._common import Progress, add_merge_options, merge_config_from_args
 
 EXIT_ALL_MERGED = 0
@@ -21,7 +22,7 @@ def register(sub) -> None:
                     "them (ROS map_server YAML in, YAML + PGM out). A NAME.scans.npz beside a map is "
                     "used when present; otherwise virtual scans are cast in the map's free space. "
                     "Exit status: 0 all maps merged, 3 some left out (not confidently placed), "
-                    "2 bad input.")
+                    "2 bad input. Report and file formats: docs/formats.md.")
     p.add_argument("maps", nargs="+", metavar="MAP.yaml", help="robot maps (two or more)")
     p.add_argument("-o", "--output", required=True, metavar="MERGED.yaml",
                    help="where to write the fused map (YAML + PGM beside it)")
@@ -78,7 +79,7 @@ def format_placements(result, names) -> str:
     """A table of each map's placement, for the terminal."""
     lines = [f"{'map':<28} {'merged':<7} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'theta (deg)':>11}"]
     for p in result.placements:
-        name = str(names[p.index])[-28:]
+        name = clip_left(str(names[p.index]), 28)
         if p.transform is None:
             lines.append(f"{name:<28} {'no':<7} {p.confidence:5.2f} {'-':>8} {'-':>8} {'-':>11}  {p.reason}")
         else:

@@ -1,4 +1,4 @@
-"""``fusionkit simulate``: robots explore a world and record maps and scans (CONTRACTS section 5)."""
+"""``fusionkit simulate``: robots explore a world and record maps and scans (docs/formats.md)."""
 
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ def register(sub) -> None:
                     "(robot_k.scans.npz) are in its OWN frame, origin at its start pose. "
                     "truth.json holds each map's true transform into the world frame, for "
                     "evaluation only; the world itself is copied to world.yaml + world.pgm. "
-                    f"World: {_DEFAULT_WORLD_NOTE}.",
+                    f"World: {_DEFAULT_WORLD_NOTE}. File formats: docs/formats.md.",
         )
     w = p.add_mutually_exclusive_group()
     w.add_argument("--world", metavar="W.yaml", default=None,
@@ -42,7 +42,8 @@ def register(sub) -> None:
     p.add_argument("--poses", type=int_range(10, 1_000_000), default=5000, metavar="P",
                    help="poses (and scans) recorded per robot (default: %(default)s)")
     p.add_argument("--seed", type=int_range(0, 2**63 - 1), default=0, metavar="S",
-                   help="seed of the simulation: starts, motion, range noise, drift (default: %(default)s)")
+                   help="seed of the simulation: starts, motion, range noise, drift; the world's "
+                        "layout has its own, --world-seed (default: %(default)s)")
     g = p.add_argument_group("LIDAR")
     g.add_argument("--beams", type=int_range(2, 10_000), default=lid.beams, metavar="B",
                    help="beams per scan (default: %(default)s)")
@@ -96,12 +97,12 @@ def run(args) -> int:
     elif args.world_kind is None and args.world_size is None and args.resolution is None \
             and args.world_seed == 0:
         world = default_world()
-        source = "office (built in)"
+        source = "office (built in, layout seed 0)"
     else:
         kind = args.world_kind or "office"
         world = make_world(kind, args.world_seed, args.world_size or DEFAULT_SIZE,
                            args.resolution or DEFAULT_RESOLUTION)
-        source = f"{kind} (generated, seed {args.world_seed})"
+        source = f"{kind} (generated, layout seed {args.world_seed})"
     mapping = MappingConfig(resolution=args.resolution or world.resolution)
     config = SimulationConfig(robots=args.robots, poses=args.poses, lidar=lidar, motion=motion,
                               mapping=mapping, seed=args.seed)
@@ -121,7 +122,9 @@ def format_summary(sim, source: str) -> str:
     w = sim.world
     cov = sim.coverage()
     lines = [f"world: {source}: {w.cols} x {w.rows} cells at {w.resolution:g} m "
-             f"({w.cols * w.resolution:g} x {w.rows * w.resolution:g} m), seed {sim.config.seed}",
+             f"({w.cols * w.resolution:g} x {w.rows * w.resolution:g} m)",
+             f"robots: simulation seed {sim.config.seed} (starts, motion, range noise, drift; "
+             f"--world-seed sets the world's layout)",
              f"{'robot':<10} {'poses':>7} {'path (m)':>9} {'map (cells)':>12} {'map (m)':>13} "
              f"{'known cells':>11} {'covers':>7}"]
     for r, c in zip(sim.robots, cov.per_robot):

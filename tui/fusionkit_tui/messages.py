@@ -40,12 +40,14 @@ class MergeFinished(Message):
     """The merge ended with ``result`` (a :class:`~fusionkit.pipeline.MergeResult`).
 
     ``evaluation`` holds the Table 1 metrics when a truth.json stood beside the maps, and
-    ``evaluation_error`` says why there are none when the truth file could not be used.
+    ``evaluation_error`` says why there are none when the truth file could not be used;
+    ``labels`` name the inputs on screen (the shortest unique ends of their paths).
     """
 
     def __init__(self, result, inputs: list[Path], evaluation=None,
-                 evaluation_error: str | None = None) -> None:
+                 evaluation_error: str | None = None, labels: list[str] | None = None) -> None:
         super().__init__()
+        self.labels = labels
         self.result = result
         self.inputs = inputs
         self.evaluation = evaluation

@@ -19,7 +19,7 @@ from fusionkit.pipeline import MergeConfig, MergeEvent, MergeResult, merge
 
 __all__ = ["MAP_SUFFIXES", "is_map_file", "find_maps", "truth_beside", "Evaluation",
            "evaluate_result", "ExportPaths", "export_paths", "export_result", "protected_files",
-           "run_merge", "initial_selection", "describe_error"]
+           "run_merge", "map_labels", "initial_selection", "describe_error", "check_map"]
 
 #: File name endings the map picker lists (map_server YAML).
 MAP_SUFFIXES = (".yaml", ".yml")
@@ -136,7 +136,7 @@ class Evaluation:
     reference : str
         Robot name whose map frame is the merged frame.
     metrics : MapMetrics
-        Of the fused map (CONTRACTS section 7), in percent.
+        Of the fused map (docs/formats.md, metrics), in percent.
     steps : tuple of MapMetrics
         Of the fused map after each fusion step (``M1``, ``M1,2``, ...).
     errors : tuple of TransformError or None
@@ -152,34 +152,42 @@ class Evaluation:
 
 
 def evaluate_result(result: MergeResult, inputs: Sequence, truth_path) -> Evaluation:
-    """Score a merge against the ground truth in ``truth_path`` (CONTRACTS sections 5 and 7).
+    """Score a merge against the ground truth in ``truth_path`` (see docs/formats.md).
 
     The merged frame is the reference map's frame, so the fused map goes into the world frame
     by the reference robot's transform; each map's true transform into the merged frame is
-    ``inv(T_ref) @ T_k``. Robots are matched to maps by the YAML file's stem.
+    ``inv(T_ref) @ T_k``. Maps are matched to the truth's robots by path (a robot ``NAME`` is
+    the ``NAME.yaml`` beside truth.json): a map of another run, even one with the same file
+    name, has no true transform here and gets no error (None).
 
     Raises
     ------
     InputError
-        A malformed truth file, or a reference map whose robot the truth file does not know.
+        A malformed truth file, or a reference map that is not one of the truth's robots.
     """
-    from fusionkit.cli.evaluate import read_truth
+    from fusionkit.cli.evaluate import read_truth, robot_of
     from fusionkit.mapio import load_map
     from fusionkit.metrics import evaluate_map, table1, transform_errors
 
     truth = read_truth(truth_path)
-    names = [Path(p).stem for p in inputs]
-    ref = names[result.config.reference]
-    if ref not in truth.robots:
-        raise InputError(f"{truth.path}: the reference map {ref} is not one of its robots "
+    robots = []
+    for p in inputs:
+        try:
+            robots.append(robot_of(truth, str(p)))
+        except InputError:
+            robots.append(None)
+    ref_path = inputs[result.config.reference]
+    ref = robots[result.config.reference]
+    if ref is None:
+        raise InputError(f"{truth.path}: the reference map {ref_path} is not one of its robots "
                          f"({', '.join(truth.robots)}); no metrics for this merge")
     world = load_map(truth.world)
     t_ref = truth.robots[ref]
     metrics = evaluate_map(result.grid, world, t_ref)
     steps = tuple(table1(result.fused.steps, world, t_ref))
     errors = []
-    for p, name in zip(result.placements, names):
-        if p.transform is None or name not in truth.robots:
+    for p, name in zip(result.placements, robots):
+        if p.transform is None or name is None:
             errors.append(None)
         else:
             errors.append(transform_errors(p.transform, t_ref.inverse @ truth.robots[name],
@@ -187,10 +195,29 @@ def evaluate_result(result: MergeResult, inputs: Sequence, truth_path) -> Evalua
     return Evaluation(truth.path, ref, metrics, steps, tuple(errors))
 
 
+def map_labels(inputs: Sequence) -> list[str]:
+    """How the UI names each input map: the shortest unique end of its path (``a/robot_1``)."""
+    from fusionkit.labels import unique_labels
+
+    return unique_labels([str(p) for p in inputs])
+
+
 def run_merge(inputs: Sequence, config: MergeConfig,
-              callback: Callable[[MergeEvent], bool | None] | None = None) -> MergeResult:
-    """:func:`fusionkit.pipeline.merge` of the map files ``inputs`` (their scans beside them)."""
-    return merge([str(p) for p in inputs], config=config, callback=callback)
+              callback: Callable[[MergeEvent], bool | None] | None = None,
+              labels: Sequence[str] | None = None) -> MergeResult:
+    """:func:`fusionkit.pipeline.merge` of the map files ``inputs`` (their scans beside them).
+
+    Each map is named by ``labels`` (default :func:`map_labels`) in the progress events and the
+    result, so that two ``robot_1.yaml`` of two runs stay apart.
+    """
+    from dataclasses import replace
+
+    from fusionkit.pipeline import load_inputs
+
+    labels = list(labels) if labels is not None else map_labels(inputs)
+    grids, scans = load_inputs([str(p) for p in inputs])
+    grids = [replace(g, name=n) for g, n in zip(grids, labels)]
+    return merge(grids, scans=scans, config=config, callback=callback)
 
 
 @dataclass(frozen=True)
@@ -244,7 +271,7 @@ def protected_files(inputs: Sequence) -> list[Path]:
 
 
 def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPaths:
-    """Write the fused map (YAML + PGM) and the merge report (CONTRACTS section 6).
+    """Write the fused map (YAML + PGM) and the merge report (docs/formats.md).
 
     Each file is written atomically and no input map, image or scan log is ever overwritten;
     existing output files are replaced (ask first).
@@ -281,3 +308,16 @@ def describe_error(exc: BaseException) -> str:
     if isinstance(exc, OSError):
         return f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": ")
     return f"{type(exc).__name__}: {exc}"
+
+
+def check_map(path) -> tuple[dict, object]:
+    """Read the map ``path`` whole: its :func:`~fusionkit.mapio.map_info` and its grid.
+
+    Raises
+    ------
+    FusionkitError or OSError
+        The map cannot be used (a bad YAML, a missing or corrupt image, ...): the message says why.
+    """
+    from fusionkit.mapio import load_map, map_info
+
+    return map_info(path), load_map(path)

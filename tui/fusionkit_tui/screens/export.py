@@ -45,6 +45,12 @@ class ExportScreen(ModalScreen[str | None]):
         color: $text-muted;
         height: auto;
     }
+    ExportScreen #export-note {
+        color: $text-warning;
+        text-style: bold;
+        height: auto;
+        margin-top: 1;
+    }
     ExportScreen #export-error {
         color: $text-error;
         height: auto;
@@ -60,15 +66,18 @@ class ExportScreen(ModalScreen[str | None]):
 
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, default: str, inputs=()) -> None:
+    def __init__(self, default: str, inputs=(), note: str = "") -> None:
         super().__init__()
         self._default = default
         self._inputs = list(inputs)
+        self._note = note
 
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Static("Export the merged map (ROS map_server YAML + PGM) and the merge report",
                          id="export-title")
+            if self._note:
+                yield Static(self._note, id="export-note")
             yield Input(self._default, id="export-path", placeholder="path/to/merged.yaml")
             yield Static("", id="export-files")
             yield Static("", id="export-error")

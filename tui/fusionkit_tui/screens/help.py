@@ -18,6 +18,7 @@ KEYS = (
         ("r  ctrl+r", "run the merge (ctrl+r also while typing a setting)"),
         ("escape", "cancel the running merge"),
         ("e", "export the merged map (YAML + PGM) and the report"),
+        ("m", "the fused (on Maps: the previewed) map on the whole screen"),
         ("? f1", "this help"),
         ("tab shift+tab", "move between the parts of a tab"),
         ("q  ctrl+q", "quit (a running merge is cancelled)"),
@@ -31,6 +32,10 @@ KEYS = (
     ("Maps: selected maps", (
         ("delete x", "remove the map from the selection"),
         ("f", "make it the reference (the merged frame)"),
+    )),
+    ("Settings", (
+        ("tab shift+tab", "into a field and between fields (or click one)"),
+        ("escape enter", "leave the field (its value is checked)"),
     )),
     ("Result", (
         ("up down", "pick a map: why it was merged or not"),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 from textual import on, work
@@ -17,7 +18,7 @@ from fusionkit.pipeline import MergeCancelled, MergeConfig, MergeEvent
 
 from ..messages import MergeFailed, MergeFinished, MergeProgress, MergeStopped
 from ..runner import (ExportPaths, describe_error, evaluate_result, export_paths, export_result,
-                      protected_files, run_merge, truth_beside)
+                      map_labels, protected_files, run_merge, truth_beside)
 from ..widgets.map_picker import MapsPane, MapTree
 from ..widgets.result_panel import ResultPanel
 from ..widgets.run_panel import RunPanel
@@ -48,9 +49,12 @@ class MainScreen(Screen):
     """
 
     BINDINGS = [
-        Binding("r,ctrl+r", "run", "Run", key_display="r"),
+        Binding("r", "run", "Run"),
+        # ctrl+r runs from anywhere, also while a setting is typed (the form shows it then)
+        Binding("ctrl+r", "run_anywhere", "Run", show=False),
         Binding("escape", "cancel", "Cancel"),
         Binding("e", "export", "Export"),
+        Binding("m", "map_view", "Map"),
         Binding("question_mark,f1", "help", "Help", key_display="?"),
         Binding("q", "quit", "Quit"),
         Binding("1", "show_tab('maps')", "Maps", show=False),
@@ -72,6 +76,12 @@ class MainScreen(Screen):
         self.inputs: list[Path] = []
         self.evaluation = None
         self.exported: ExportPaths | None = None
+        #: The names the result shows for its inputs (shortest unique ends of their paths).
+        self.labels: list[str] = []
+        #: When the last run did not end well: why ("cancelled", "failed"), so that the result
+        #: still held is known to be an earlier one.
+        self.last_run_outcome: str | None = None
+        self.result_time: str = ""
 
     def compose(self) -> ComposeResult:
         with TabbedContent(initial="maps"):
@@ -102,14 +112,30 @@ class MainScreen(Screen):
     def result_panel(self) -> ResultPanel:
         return self.query_one(ResultPanel)
 
+    def _typing(self) -> bool:
+        """A text field has the keyboard (printable keys type into it)."""
+        return isinstance(self.focused, Input)
+
     def check_action(self, action: str, parameters: tuple) -> bool | None:
+        typing = self._typing()
         if action == "cancel":
-            return True if self.merging else None
+            return True if self.merging else False  # shown only while there is a run to cancel
         if action == "run":
+            # while a field is typed into, r is a letter: the footer offers ctrl+r instead
+            return False if typing else None if self.merging else True
+        if action == "run_anywhere":
             return None if self.merging else True
+        if action in ("quit", "map_view", "export") and typing:
+            return False  # the key types into the field
         if action == "export":
             return True if self.result is not None and not self.merging else None
         return True
+
+    def on_descendant_focus(self, event) -> None:
+        self.refresh_bindings()
+
+    def on_descendant_blur(self, event) -> None:
+        self.refresh_bindings()
 
     # -- tabs and help ---------------------------------------------------------------------------
     def action_show_tab(self, tab: str) -> None:
@@ -120,7 +146,8 @@ class MainScreen(Screen):
         if tab == "maps":
             self.query_one(MapTree).focus()
         elif tab == "settings":
-            self.query_one("#set-theta", Input).focus()
+            # the form, not a field: keys stay the app's until a field is clicked or tabbed into
+            self.settings.focus()
         elif tab == "result":
             self.query_one("#placements", DataTable).focus()
         else:
@@ -137,15 +164,40 @@ class MainScreen(Screen):
     def action_quit(self) -> None:
         self.app.exit()
 
+    def action_map_view(self) -> None:
+        """The fused map on the whole screen (on the Maps tab: the map being previewed)."""
+        from .map_view import MapScreen
+
+        tab = self.query_one(TabbedContent).active
+        if tab == "maps" or self.result is None:
+            preview = self.maps.query_one("#preview")
+            if preview.grid is None:
+                self.notify("no map to show: highlight a map, or run a merge", severity="warning")
+                return
+            title = self.maps.previewing_label()
+            self.app.push_screen(MapScreen(preview.grid, title, legend=self.result_panel.plain_legend()))
+            return
+        self.app.push_screen(MapScreen(self.result.grid, self.result_panel.title(),
+                                       self.result_panel.owner(), self.result_panel.legend()))
+
     # -- merge -----------------------------------------------------------------------------------
+    def action_run_anywhere(self) -> None:
+        self.action_run()
+
     def action_run(self) -> None:
         if self.merging:
             self.notify("a merge is running; escape cancels it", severity="warning")
             return
-        maps = self.maps.selected
+        maps = self.maps.usable()
+        bad = self.maps.unreadable
+        if bad:
+            self.notify("; ".join(f"{why}" for why in list(bad.values())[:2])
+                        + ("; ..." if len(bad) > 2 else ""),
+                        title=f"{len(bad)} unreadable map{'s' if len(bad) > 1 else ''} left out",
+                        severity="warning", timeout=8)
         if len(maps) < 2:
-            self.notify(f"select at least two maps to merge ({len(maps)} selected): highlight a "
-                        f"map and press space, or press a on a directory", severity="error",
+            self.notify(f"select at least two readable maps to merge ({len(maps)} selected): "
+                        f"highlight a map and press space, or press a on a directory", severity="error",
                         title="Nothing to merge")
             self.action_show_tab("maps")
             return
@@ -158,10 +210,10 @@ class MainScreen(Screen):
         self.merging = True
         self.run_panel.begin(len(maps), config.pso.iterations, config.method)
         self.action_show_tab("run")
-        self._merge(list(maps), config)
+        self._merge(list(maps), config, map_labels(maps))
 
     @work(thread=True, exclusive=True, group="merge", exit_on_error=False)
-    def _merge(self, inputs: list[Path], config: MergeConfig) -> None:
+    def _merge(self, inputs: list[Path], config: MergeConfig, labels: list[str]) -> None:
         """Run the merge off the UI thread; talk to the UI only through messages."""
         worker = get_current_worker()
 
@@ -176,7 +228,7 @@ class MainScreen(Screen):
             return False
 
         try:
-            result = run_merge(inputs, config, callback)
+            result = run_merge(inputs, config, callback, labels)
         except MergeCancelled:
             self.post_message(MergeStopped())
             return
@@ -196,7 +248,7 @@ class MainScreen(Screen):
         if worker.is_cancelled:
             self.post_message(MergeStopped())
             return
-        self.post_message(MergeFinished(result, inputs, evaluation, evaluation_error))
+        self.post_message(MergeFinished(result, inputs, evaluation, evaluation_error, labels))
 
     def action_cancel(self) -> None:
         if not self.merging:
@@ -213,7 +265,10 @@ class MainScreen(Screen):
     def _on_finished(self, msg: MergeFinished) -> None:
         self.merging = False
         self.result, self.inputs, self.evaluation = msg.result, list(msg.inputs), msg.evaluation
+        self.labels = list(msg.labels) if msg.labels else map_labels(msg.inputs)
         self.exported = None
+        self.last_run_outcome = None
+        self.result_time = time.strftime("%H:%M:%S")
         r = msg.result
         merged = sum(p.merged for p in r.placements)
         summary = f"done: {merged} of {len(r.placements)} maps merged"
@@ -221,7 +276,7 @@ class MainScreen(Screen):
             summary += f"; completeness {msg.evaluation.metrics.completeness:.1f} %, " \
                        f"precision {msg.evaluation.metrics.precision:.1f} %"
         self.run_panel.finish(summary)
-        self.result_panel.show(r, [p.stem for p in msg.inputs], msg.evaluation, msg.evaluation_error)
+        self.result_panel.show(r, self.labels, msg.evaluation, msg.evaluation_error)
         seconds = r.seconds.get("total", 0.0)
         self.notify(f"{merged} of {len(r.placements)} maps merged in {seconds:.1f} s; e exports",
                     title="Merge done", severity="information" if r.all_merged else "warning")
@@ -229,18 +284,31 @@ class MainScreen(Screen):
             self.notify(msg.evaluation_error, severity="warning")
         self.action_show_tab("result")
 
+    def _earlier(self) -> str:
+        """Words for the result still held after a run that did not end well."""
+        if self.result is None:
+            return ""
+        return f" (the result of the earlier merge at {self.result_time} is kept)"
+
     @on(MergeStopped)
     def _on_stopped(self, msg: MergeStopped) -> None:
+        # said on the run panel only: a toast would cover the plot's axis
         self.merging = False
-        kept = " (the previous result is kept)" if self.result is not None else ""
-        self.run_panel.stopped(f"cancelled{kept}")
-        self.notify(f"merge cancelled{kept}", severity="warning")
+        self.run_panel.stopped(f"cancelled{self._earlier()}")
+        if self.result is not None:
+            self.last_run_outcome = "was cancelled"
+            self.result_panel.mark_earlier(f"the last run was cancelled; this is the merge of "
+                                           f"{self.result_time}")
 
     @on(MergeFailed)
     def _on_failed(self, msg: MergeFailed) -> None:
         self.merging = False
         self.run_panel.stopped(f"failed: {msg.error}")
-        self.notify(msg.error, title="Merge failed", severity="error", timeout=10)
+        self.notify(msg.error + self._earlier(), title="Merge failed", severity="error", timeout=10)
+        if self.result is not None:
+            self.last_run_outcome = "failed"
+            self.result_panel.mark_earlier(f"the last run failed; this is the merge of "
+                                           f"{self.result_time}")
 
     # -- export ----------------------------------------------------------------------------------
     def default_export_path(self) -> str:
@@ -257,8 +325,14 @@ class MainScreen(Screen):
         if self.result is None:
             self.notify("nothing to export yet: run a merge first (r)", severity="warning")
             return
-        self.app.push_screen(ExportScreen(self.default_export_path(), protected_files(self.inputs)),
-                             self._export_to)
+        note = ""
+        if self.last_run_outcome is not None:
+            merged = sum(p.merged for p in self.result.placements)
+            note = (f"The last run {self.last_run_outcome}: this exports the EARLIER result, the "
+                    f"merge of {self.result_time} ({merged} of {len(self.result.placements)} maps "
+                    f"merged).")
+        self.app.push_screen(ExportScreen(self.default_export_path(), protected_files(self.inputs),
+                                          note=note), self._export_to)
 
     def _export_to(self, path: str | None) -> None:
         if path is None:

@@ -63,6 +63,8 @@ class MapTree(DirectoryTree):
     def __init__(self, path, *, id: str | None = None) -> None:
         super().__init__(path, id=id)
         self.chosen: set[Path] = set()
+        #: Maps found unreadable (resolved path -> why): marked with a cross.
+        self.unreadable: dict[Path, str] = {}
 
     def filter_paths(self, paths: Iterable[Path]) -> Iterable[Path]:
         return [p for p in paths
@@ -72,13 +74,19 @@ class MapTree(DirectoryTree):
         text = super().render_label(node, base_style, style)
         entry = node.data
         if entry is not None and not node.allow_expand:
-            mark = "✓ " if entry.path.resolve() in self.chosen else "  "
-            text = Text.assemble((mark, "bold"), text)
+            where = entry.path.resolve()
+            if where in self.unreadable:
+                text = Text.assemble(("✗ ", "bold red"), text)
+            else:
+                mark = "✓ " if where in self.chosen else "  "
+                text = Text.assemble((mark, "bold"), text)
         return text
 
-    def mark(self, chosen: Iterable[Path]) -> None:
-        """Show a check mark beside the files in ``chosen``."""
+    def mark(self, chosen: Iterable[Path], unreadable: dict | None = None) -> None:
+        """Show a check mark beside the files in ``chosen``, a cross beside ``unreadable`` ones."""
         self.chosen = {Path(p).resolve() for p in chosen}
+        if unreadable is not None:
+            self.unreadable = dict(unreadable)
         self._invalidate()
 
     def _cursor_path(self) -> Path | None:
@@ -138,13 +146,26 @@ class SelectedMaps(DataTable):
     def on_mount(self) -> None:
         self.add_columns("", "map", "cells", "m/cell", "scans")
 
-    def show(self, entries: list[tuple[Path, dict]], cursor: int | None = None) -> None:
-        """List ``(path, map_info)`` entries."""
+    def show(self, entries: list[tuple[Path, dict | None]], cursor: int | None = None,
+             unreadable: dict | None = None) -> None:
+        """List ``(path, map_info)`` entries (info None: the map cannot be read; ``unreadable``
+        maps resolved paths to the reason). Maps are named by the shortest unique end of
+        their path."""
+        from ..runner import map_labels
+
+        unreadable = unreadable or {}
         self.clear()
-        for k, (path, info) in enumerate(entries):
-            self.add_row("ref" if k == 0 else f"{k + 1}", info["name"],
+        labels = map_labels([p for p, _ in entries])
+        usable = 0
+        for k, ((path, info), label) in enumerate(zip(entries, labels)):
+            if info is None or path.resolve() in unreadable:
+                self.add_row(Text("✗", style="bold red"), Text(label, style="red"),
+                             Text("unreadable", style="red"), "", "", key=str(k))
+                continue
+            self.add_row("ref" if usable == 0 else f"{usable + 1}", label,
                          f"{info['cols']}x{info['rows']}", f"{info['resolution']:g}",
                          "yes" if info["has_scans"] else "no", key=str(k))
+            usable += 1
         if entries and cursor is not None:
             self.move_cursor(row=max(0, min(cursor, len(entries) - 1)))
 
@@ -205,14 +226,52 @@ class MapsPane(Vertical):
         super().__init__(id=id)
         self._root = Path(root)
         self._initial = list(selected)
-        self._entries: list[tuple[Path, dict]] = []
+        self._entries: list[tuple[Path, dict | None]] = []
         self._grids: OrderedDict = OrderedDict()
         self._previewing: Path | None = None
+        #: Resolved paths of maps that cannot be read, with the reason.
+        self._unreadable: dict[Path, str] = {}
+        #: Resolved paths of chosen maps read whole without error.
+        self._checked: set[Path] = set()
 
     @property
     def selected(self) -> list[Path]:
-        """The chosen map files, reference first."""
+        """The chosen map files, reference first (unreadable ones included)."""
         return [p for p, _ in self._entries]
+
+    @property
+    def unreadable(self) -> dict[Path, str]:
+        """Chosen maps that cannot be read (path as chosen -> why)."""
+        return {p: self._unreadable[p.resolve()] for p, _ in self._entries
+                if p.resolve() in self._unreadable}
+
+    def usable(self) -> list[Path]:
+        """The chosen maps a merge can use, reference first: each read whole now if it was not
+        yet; the unreadable ones are left out (see :attr:`unreadable`)."""
+        from ..runner import check_map
+
+        out = []
+        for p, _ in self._entries:
+            where = p.resolve()
+            if where not in self._checked and where not in self._unreadable:
+                try:
+                    info, grid = check_map(p)
+                except (FusionkitError, OSError) as exc:
+                    self._mark_unreadable(p, describe_error(exc))
+                    continue
+                self._cache(p, grid, info)
+                self._checked.add(where)
+            if where not in self._unreadable:
+                out.append(p)
+        return out
+
+    def previewing_label(self) -> str:
+        """The map being previewed, named by the shortest unique end of its path."""
+        from ..runner import map_labels
+
+        if self._previewing is None:
+            return ""
+        return map_labels([*self.selected, self._previewing])[-1]
 
     def compose(self) -> ComposeResult:
         with Horizontal():
@@ -228,8 +287,7 @@ class MapsPane(Vertical):
                 yield MapPreview(id="preview")
 
     def on_mount(self) -> None:
-        errors = self._add(self._initial)
-        self._report(errors)
+        self._report(self._add(self._initial))
         if self._entries:
             self._preview(self._entries[0][0])
         else:
@@ -242,7 +300,8 @@ class MapsPane(Vertical):
         return map_info(path)
 
     def _add(self, paths: Iterable[Path]) -> list[str]:
-        """Add maps not chosen yet; return one message per map that cannot be read."""
+        """Add maps not chosen yet, each checked in the background; return one message per map
+        that cannot be read (it is listed as unreadable, and left out of a merge)."""
         have = {p.resolve() for p, _ in self._entries}
         errors = []
         for p in paths:
@@ -252,23 +311,59 @@ class MapsPane(Vertical):
             try:
                 info = self._info(p)
             except (FusionkitError, OSError) as exc:
+                info = None
                 errors.append(describe_error(exc))
-                continue
+                self._unreadable[p.resolve()] = errors[-1]
             self._entries.append((p, info))
             have.add(p.resolve())
+            if info is not None and p.resolve() not in self._checked:
+                self._check(p)
         self._changed()
         return errors
 
+    @work(thread=True, group="check", exit_on_error=False)
+    def _check(self, path: Path) -> None:
+        """Read a chosen map whole (a corrupt image shows only then)."""
+        from ..runner import check_map
+
+        try:
+            info, grid = check_map(path)
+        except (FusionkitError, OSError) as exc:
+            self.app.call_from_thread(self._mark_unreadable, path, describe_error(exc))
+            return
+        self.app.call_from_thread(self._mark_readable, path, grid, info)
+
+    def _mark_readable(self, path: Path, grid, info: dict) -> None:
+        self._checked.add(path.resolve())
+        self._cache(path, grid, info)
+
+    def _mark_unreadable(self, path: Path, why: str) -> None:
+        where = path.resolve()
+        if self._unreadable.get(where) == why:
+            return
+        self._unreadable[where] = why
+        self._checked.discard(where)
+        chosen = any(p.resolve() == where for p, _ in self._entries)
+        if chosen:
+            self._changed()
+            self.notify(f"{why}; it is left out of the merge", title="Unreadable map",
+                        severity="error", timeout=8)
+        else:
+            self.query_one(MapTree).mark(self.selected, self._unreadable)
+        if self._previewing is not None and self._previewing.resolve() == where:
+            self._show_error(path, why)
+
     def _report(self, errors: list[str]) -> None:
         for e in errors[:3]:
-            self.notify(e, title="Cannot use this map", severity="error", timeout=8)
+            self.notify(f"{e}; it is left out of the merge", title="Unreadable map",
+                        severity="error", timeout=8)
         if len(errors) > 3:
             self.notify(f"{len(errors) - 3} more maps could not be read", severity="error")
 
     def _changed(self, cursor: int | None = None) -> None:
         table = self.query_one(SelectedMaps)
-        table.show(self._entries, cursor if cursor is not None else table.cursor_row)
-        self.query_one(MapTree).mark(self.selected)
+        table.show(self._entries, cursor if cursor is not None else table.cursor_row, self._unreadable)
+        self.query_one(MapTree).mark(self.selected, self._unreadable)
         self.post_message(self.Changed(self.selected))
 
     def toggle(self, path: Path) -> None:
@@ -323,9 +418,14 @@ class MapsPane(Vertical):
     @on(SelectedMaps.MakeReference)
     def _on_reference(self, event: SelectedMaps.MakeReference) -> None:
         if 0 < event.index < len(self._entries):
+            path = self._entries[event.index][0]
+            if path.resolve() in self._unreadable:
+                self.notify(f"{path} cannot be read, so it cannot be the reference",
+                            severity="error")
+                return
             self._entries.insert(0, self._entries.pop(event.index))
             self._changed(cursor=0)
-            self.notify(f"{self._entries[0][1]['name']} is the reference: the merged map is in its frame")
+            self.notify(f"{path} is the reference: the merged map is in its frame")
 
     # -- preview ---------------------------------------------------------------------------------
     @on(DirectoryTree.NodeHighlighted)
@@ -344,6 +444,10 @@ class MapsPane(Vertical):
         if self._previewing is not None and path.resolve() == self._previewing.resolve():
             return
         self._previewing = path
+        why = self._unreadable.get(path.resolve())
+        if why is not None:
+            self._show_error(path, why)
+            return
         cached = self._grids.get(path.resolve())
         if cached is not None:
             self._show(path, *cached)
@@ -361,23 +465,30 @@ class MapsPane(Vertical):
             grid = load_map(path)
         except (FusionkitError, OSError) as exc:
             if not worker.is_cancelled:
+                self.app.call_from_thread(self._mark_unreadable, path, describe_error(exc))
                 self.app.call_from_thread(self._show_error, path, describe_error(exc))
             return
         if not worker.is_cancelled:
             self.app.call_from_thread(self._loaded, path, grid, info)
 
-    def _loaded(self, path: Path, grid, info: dict) -> None:
+    def _cache(self, path: Path, grid, info: dict) -> None:
         self._grids[path.resolve()] = (grid, info)
         while len(self._grids) > self._CACHE_SIZE:
             self._grids.popitem(last=False)
+
+    def _loaded(self, path: Path, grid, info: dict) -> None:
+        self._cache(path, grid, info)
         if self._previewing is not None and self._previewing.resolve() == path.resolve():
             self._show(path, grid, info)
 
     def _show(self, path: Path, grid, info: dict) -> None:
-        self.query_one("#info", Static).update(format_info(info))
+        from ..runner import map_labels
+
+        labels = map_labels([*self.selected, path])
+        self.query_one("#info", Static).update(format_info({**info, "name": labels[-1]}))
         self.query_one(MapPreview).show(grid)
 
     def _show_error(self, path: Path, message: str) -> None:
         if self._previewing is not None and self._previewing.resolve() == path.resolve():
-            self.query_one("#info", Static).update(Text(message, style="bold red"))
-            self.query_one(MapPreview).clear("cannot show this map")
+            self.query_one("#info", Static).update(Text(f"unreadable: {message}", style="bold red"))
+            self.query_one(MapPreview).clear("cannot read this map: it is left out of a merge")

@@ -60,6 +60,7 @@ class ResultPanel(Vertical):
         self._result = None
         self._names: list[str] = []
         self._by_robot = True
+        self._earlier = ""
 
     def compose(self) -> ComposeResult:
         yield Label("Maps: transform into the reference frame", classes="heading")
@@ -84,8 +85,10 @@ class ResultPanel(Vertical):
         return self._result
 
     def show(self, result, names: list[str], evaluation=None, evaluation_error: str | None = None) -> None:
-        """Show ``result``; ``names`` are the input maps' names in input order."""
+        """Show ``result``; ``names`` are the input maps' names in input order (the shortest
+        unique ends of their paths)."""
         self._result, self._names = result, list(names)
+        self._earlier = ""
         self._draw_map()
         table = self.query_one("#placements", DataTable)
         table.clear(columns=True)
@@ -114,9 +117,9 @@ class ResultPanel(Vertical):
             note.update(evaluation_error or "no truth.json beside the maps: no ground truth to score against")
             return
         metrics.display = True
-        note.update(f"against {evaluation.truth.name}, in {evaluation.reference}'s frame")
+        note.update(f"against {evaluation.truth}, in the frame of its {evaluation.reference}")
         metrics.add_columns("maps", "compl", "acc", "prec", "eff")
-        order = list(result.order)
+        order = list(result.fused.order)  # the maps in the fused map, in the order they were added
         for k, m in enumerate(evaluation.steps):
             # row k is the fused map after the (k+1)-th map of the fusion order was added
             label = (self._names[order[k]] if k == 0 else "+ " + self._names[order[k]]) \
@@ -124,25 +127,49 @@ class ResultPanel(Vertical):
             metrics.add_row(label, f"{m.completeness:.1f}", f"{m.accuracy:.1f}",
                             f"{m.precision:.1f}", f"{m.efficiency:.1f}")
 
+    def owner(self):
+        """Per cell of the fused map, the input that gave it (None in the plain view)."""
+        return self._result.fused.owner if self._result is not None and self._by_robot else None
+
+    def plain_legend(self) -> Text:
+        """What the states look like in a plain map."""
+        return Text("█ wall  ░ free  (blank) unknown" if getattr(self.app, "no_color", False)
+                    else "white wall, blue free, black unknown")
+
+    def legend(self) -> Text:
+        """The fused map's legend: each merged map's colour, or the states."""
+        if self._result is None or not self._by_robot or getattr(self.app, "no_color", False):
+            return self.plain_legend()
+        legend = Text()
+        for p in self._result.placements:
+            if p.merged:
+                legend.append("█ ", style=robot_colour(p.index))
+                legend.append(f"{self._names[p.index]}  ")
+        return legend
+
+    def title(self) -> str:
+        """The fused map's heading."""
+        r = self._result
+        merged = sum(p.merged for p in r.placements)
+        return (f"Fused map: {merged} of {len(r.placements)} maps, {r.grid.cols}x{r.grid.rows} "
+                f"cells{self._earlier}")
+
+    def mark_earlier(self, why: str) -> None:
+        """Say that the result shown is an earlier one (the last run was cancelled or failed)."""
+        if self._result is None:
+            return
+        self._earlier = " (earlier run)"
+        self.query_one("#why", Static).update(Text(why + "; e exports it, r runs again", style="bold yellow"))
+        self._draw_map()
+
     def _draw_map(self) -> None:
         if self._result is None:
             return
         r = self._result
         preview = self.query_one("#fused-map", MapPreview)
-        preview.show(r.grid, r.fused.owner if self._by_robot else None)
-        legend = Text()
-        if self._by_robot and not getattr(self.app, "no_color", False):
-            for p in r.placements:
-                if p.merged:
-                    legend.append("█ ", style=robot_colour(p.index))
-                    legend.append(f"{self._names[p.index]}  ")
-        else:
-            legend.append("█ wall  ░ free  (blank) unknown" if getattr(self.app, "no_color", False)
-                          else "white wall, blue free, black unknown")
-        self.query_one("#legend", Static).update(legend)
-        merged = sum(p.merged for p in r.placements)
-        self.query_one("#fused-heading", Label).update(
-            f"Fused map: {merged} of {len(r.placements)} maps, {r.grid.cols}x{r.grid.rows} cells")
+        preview.show(r.grid, self.owner())
+        self.query_one("#legend", Static).update(self.legend())
+        self.query_one("#fused-heading", Label).update(self.title())
 
     def _explain(self, row: int) -> None:
         why = self.query_one("#why", Static)

@@ -144,8 +144,10 @@ class RunPanel(Vertical):
         if ev.stage == "done":
             return
         self.query_one("#stages", Static).update(self._stages(ev.stage, ev.step, ev.total))
-        self.query_one(ProgressBar).update(
-            progress=100 * overall_fraction(ev.stage, ev.step, ev.total, ev.iteration, self._iterations))
+        # never backwards: a refinement swarm restarts its iterations within the same step
+        bar = self.query_one(ProgressBar)
+        done = 100 * overall_fraction(ev.stage, ev.step, ev.total, ev.iteration, self._iterations)
+        bar.update(progress=max(done, bar.progress or 0))
         detail = self.query_one("#detail", Static)
         left = self.query_one("#left", Static)
         if ev.stage == "align":

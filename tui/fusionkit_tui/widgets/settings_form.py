@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 
 from rich.text import Text
 from textual import on
+from textual.binding import Binding
 from textual.app import ComposeResult
 from textual.containers import Grid, VerticalScroll
 from textual.validation import ValidationResult, Validator
@@ -126,12 +127,22 @@ def _default_text(s: Setting) -> str:
     return "" if s.default is None else f"{s.default:g}" if isinstance(s.default, float) else str(s.default)
 
 
-_NOTE = ("tab / shift+tab move between fields; an invalid value turns red and blocks the run; "
-         "ctrl+r runs.")
+_NOTE = ("tab moves into the fields (or click one); escape or enter leaves a field; an invalid "
+         "value turns red and blocks the run; 1-4 switch tabs, r runs (ctrl+r while typing).")
 
 
-class SettingsForm(VerticalScroll):
-    """Every merge setting with its default; invalid values are flagged as they are typed."""
+class SettingsForm(VerticalScroll, can_focus=True):
+    """Every merge setting with its default; invalid values are flagged as they are typed.
+
+    The form itself takes the focus when its tab is shown, so the app's keys (``1``-``4``,
+    ``r``, ``q``) keep working; a field takes text only once it is clicked or tabbed into, and
+    leaving it (escape, enter, tab, a click elsewhere) checks its value.
+    """
+
+    BINDINGS = [
+        Binding("escape", "leave_field", "Done"),
+        Binding("ctrl+r", "run_from_field", "Run"),
+    ]
 
     DEFAULT_CSS = """
     SettingsForm {
@@ -201,6 +212,50 @@ class SettingsForm(VerticalScroll):
 
     def on_descendant_focus(self, event) -> None:
         self._describe(event.widget)
+
+    def _field(self) -> Input | None:
+        f = self.screen.focused if self.is_attached else None
+        return f if isinstance(f, Input) and self in f.ancestors else None
+
+    def check_action(self, action: str, parameters: tuple) -> bool | None:
+        # only while a field is typed into; otherwise escape and ctrl+r are the screen's
+        if action in ("leave_field", "run_from_field"):
+            return self._field() is not None
+        return True
+
+    def action_run_from_field(self) -> None:
+        self.screen.action_run()
+
+    def action_leave_field(self) -> None:
+        """Give the keys back to the app (the value is checked as the field loses focus)."""
+        if self._field() is not None:
+            self.focus()
+
+    @on(Input.Submitted)
+    def _on_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        self.focus()
+
+    @on(Input.Blurred)
+    def _on_blurred(self, event: Input.Blurred) -> None:
+        key = (event.input.id or "").removeprefix("set-")
+        for s in SETTINGS:
+            if s.key == key:
+                try:
+                    value = parse_setting(s, event.input.value)
+                except InputError as exc:
+                    self._hint(s, str(exc).split(": ", 1)[-1])
+                    event.input.add_class("-invalid")
+                    self.notify(f"{exc}; the merge will not run until it is fixed",
+                                title="Check the settings", severity="error", timeout=6)
+                    return
+                default = s.default
+                if value != default:
+                    was = "blank" if default is None else _default_text(s)
+                    now = "blank" if value is None else event.input.value.strip()
+                    self.query_one(f"#hint-{s.key}", Static).update(
+                        Text.assemble((f"set to {now}", "bold"), f" (default {was}): {s.help}"))
+                return
 
     def _describe(self, widget) -> None:
         """Say in full what the field ``widget`` is, and what is wrong with its value."""

@@ -1,0 +1,77 @@
+"""The command line as a newcomer meets it: the command list, run's options and output,
+simulate's summary."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+
+import pytest
+
+from fusionkit.cli import COMMANDS, build_parser, main
+
+
+def _subparsers(parser):
+    return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+
+
+def test_help_lists_every_command_with_its_own_words_without_loading_the_heavy_parts():
+    full = _subparsers(build_parser())
+    listed = {a.dest: a.help for a in full._choices_actions}
+    assert list(listed) == list(COMMANDS)
+    for name, (_, help_text) in COMMANDS.items():
+        assert listed[name] == help_text, name  # the list says what the command says
+    code = ("import sys; from fusionkit.cli import main\n"
+            "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+            "heavy = sorted(m for m in ('numba', 'scipy', 'textual', 'cv2', 'matplotlib') if m in sys.modules)\n"
+            "print('HEAVY', heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60).stdout
+    assert "HEAVY []" in out, out
+    assert "docs/formats.md" in out and all(name in out for name in COMMANDS)
+
+
+def test_help_cites_the_shipped_formats_document_not_a_contract_section(capsys):
+    for name in COMMANDS:
+        with pytest.raises(SystemExit):
+            main([name, "--help"])
+        text = capsys.readouterr().out
+        assert "CONTRACTS" not in text, name
+    from pathlib import Path
+    doc = Path(__file__).resolve().parents[1] / "docs" / "formats.md"
+    text = doc.read_text(encoding="utf-8")
+    for needle in ("map_server", "scans.npz", "truth.json", "report", "completeness", "radians"):
+        assert needle in text
+
+
+def test_run_takes_seed_like_simulate_and_keeps_the_old_name():
+    parser = build_parser(["run"])
+    a = parser.parse_args(["run", "--seed", "3"])
+    assert a.sim_seed == 3 and a.seed == 0  # the merge keeps its own seed
+    assert parser.parse_args(["run", "--sim-seed", "4"]).sim_seed == 4
+    b = parser.parse_args(["run", "--merge-seed", "5"])
+    assert b.seed == 5 and b.sim_seed == 7
+
+
+def test_run_prints_one_fusion_order_and_explains_the_table(tmp_path, capsys):
+    code = main(["run", "--robots", "2", "--poses", "300", "--seed", "3", "--iterations", "20",
+                 "--out", str(tmp_path / "r")])
+    out = capsys.readouterr().out
+    assert code in (0, 3)
+    assert sum(line.startswith("fusion order") for line in out.splitlines()) == 1
+    for column in ("Compl ", "Acc ", "Prec ", "Eff ", "Prec1 "):
+        assert any(line.strip().startswith(column) for line in out.splitlines()), column
+    assert "Row M1 is the first map" in out and "oracle" in out
+    assert "(seed 3)" in out
+    truth = json.loads((tmp_path / "r" / "truth.json").read_text())
+    assert truth["seed"] == 3
+
+
+def test_simulate_says_which_seed_is_the_world_and_which_the_robots(tmp_path, capsys):
+    assert main(["simulate", "--robots", "1", "--poses", "50", "--seed", "1",
+                 "--out", str(tmp_path / "s")]) == 0
+    out = capsys.readouterr().out
+    world = next(line for line in out.splitlines() if line.startswith("world:"))
+    assert "layout seed 0" in world and "seed 1" not in world
+    assert "simulation seed 1" in out
