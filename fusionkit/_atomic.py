@@ -1,45 +1,394 @@
-"""Atomic file writes: write to a temporary file beside the target, then rename over it."""
+"""Crash-safe writes of one file or of a set of files that belong together.
+
+A merged map is a *set*: ``merged.yaml``, the image it names, the report, maybe group maps. A
+reader must never find files of two different writes together, and a crash (``kill -9``, a
+power cut) or a signal at any instant must leave either the old set or the new one.
+:func:`write_set` gives that promise with an undo journal and one commit point:
+
+1. Lock every directory of the set (``flock``): a second writer to the same output waits, so
+   two writers end with the whole set of one of them.
+2. Recover: a journal left by a killed write is rolled back (or forward, if that write had
+   reached its commit point); temporary and backup files a killed write left are removed.
+3. Stage every new file under a temporary name beside its target, ``fsync`` each.
+4. Write and ``fsync`` the journal (each target, its backup, whether it existed).
+5. Hide the commit file and the files named in ``hide_first`` (a map YAML, so that its old
+   text never stands beside a new image); hard-link a backup of every other existing target.
+6. Rename the staged files into place in the order given; the commit file last: that rename
+   is the commit point. Then drop the journal and the backups.
+
+SIGINT and SIGTERM are held back from step 4 on; one that arrives before the commit point
+rolls the write back (the old set stays whole), one after it lets the write finish. An error
+(disk full, permission) rolls back too and is raised as one :class:`InputError` line.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import hashlib
+import json
 import os
-import tempfile
+import secrets
+import shutil
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator, Sequence
 
+from . import _signals
 from .errors import InputError
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "check_not_input"]
+__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set",
+           "check_not_input", "check_distinct", "describe_os_error", "show"]
+
+_TMP, _BAK, _JOURNAL = ".tmp", ".bak", ".journal"
+
+
+# ---------------------------------------------------------------------------------------------
+# Small helpers
+# ---------------------------------------------------------------------------------------------
+def show(value, limit: int = 80) -> str:
+    """``repr`` of a value from a file or the command line, cut to ``limit`` characters (control
+    characters escaped): safe in a one-line message whatever the input holds."""
+    if isinstance(value, (str, bytes)) and len(value) > 4 * limit:
+        value = value[:4 * limit]
+    elif isinstance(value, (list, tuple)) and len(value) > limit:
+        value = type(value)(value[:limit])
+    elif isinstance(value, dict) and len(value) > limit:
+        value = dict(list(value.items())[:limit])
+    try:
+        text = repr(value)
+    except (RecursionError, ValueError):
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= limit else text[:limit - 4] + " ..."
+
+
+def describe_os_error(exc: OSError) -> str:
+    """The reason of an OSError in words, without the path (the caller names the file)."""
+    return exc.strerror or exc.__class__.__name__
+
+
+def _write_error(path: Path, exc: OSError) -> InputError:
+    hint = {errno.EACCES: "check the folder's permissions or choose another output",
+            errno.EPERM: "check the folder's permissions or choose another output",
+            errno.EROFS: "the file system is read-only; choose another output",
+            errno.ENOSPC: "free some disk space or choose another output",
+            errno.EDQUOT: "free some disk space or choose another output",
+            errno.ENAMETOOLONG: "use a shorter file name",
+            errno.EISDIR: "it is a folder; give a file name",
+            errno.ENOTDIR: "a part of the path is a file, not a folder"}.get(
+        exc.errno, "check the path and the disk")
+    return InputError(f"{_short(path)}: cannot be written ({describe_os_error(exc)}); {hint}")
+
+
+def _short(path) -> str:
+    """A path for a message: very long names are cut in the middle."""
+    s = str(path)
+    return s if len(s) <= 160 else s[:70] + "..." + s[-70:]
+
+
+def _fsync_dir(directory: Path) -> None:
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some file systems cannot sync a directory; the renames are still atomic
+    finally:
+        os.close(fd)
+
+
+def _write_durable(path: Path, payload: bytes) -> None:
+    """Create ``path`` (which must not exist) holding ``payload``, flushed to disk."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+    try:
+        view = memoryview(payload)
+        while view:
+            n = os.write(fd, view)
+            view = view[n:]
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _parent(path: Path) -> Path:
+    return path.parent if str(path.parent) else Path(".")
+
+
+def _check_target(path: Path) -> None:
+    parent = _parent(path)
+    if not parent.is_dir():
+        if parent.exists():
+            raise InputError(f"{_short(path)}: {_short(parent)} is a file, not a folder; "
+                             f"choose another output")
+        raise InputError(f"{_short(path)}: the output folder {_short(parent)} does not exist; "
+                         f"create it first")
+    if path.is_dir():
+        raise InputError(f"{_short(path)}: is an existing folder; give a file name for the output")
+    if len(path.name.encode()) > 200:
+        raise InputError(f"{_short(path)}: the file name is {len(path.name.encode())} bytes long; "
+                         f"use a name of at most 200 bytes")
+
+
+@contextlib.contextmanager
+def _locked(directories: Iterable[Path]) -> Iterator[None]:
+    """Exclusive ``flock`` on each directory (sorted, so that two writers cannot deadlock)."""
+    try:
+        import fcntl
+    except ImportError:  # no flock on this platform: writes are still atomic one by one
+        yield
+        return
+    fds = []
+    try:
+        for d in sorted({os.path.realpath(d) for d in directories}):
+            fd = os.open(d, os.O_RDONLY)
+            fds.append(fd)
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        for fd in reversed(fds):
+            os.close(fd)  # closing the descriptor releases its lock
+
+
+def _is_leftover(name: str, target: str) -> bool:
+    return (name.startswith(f".{target}.") and name != f".{target}{_JOURNAL}"
+            and (name.endswith(_TMP) or name.endswith(_BAK)))
+
+
+def _sweep(targets: Iterable[Path]) -> None:
+    """Remove temporary and backup files that a killed write of these targets left behind."""
+    by_dir: dict[Path, set[str]] = {}
+    for t in targets:
+        by_dir.setdefault(_parent(t), set()).add(t.name)
+    for d, names in by_dir.items():
+        try:
+            entries = os.listdir(d)
+        except OSError:
+            continue
+        for entry in entries:
+            if entry.startswith(".") and any(_is_leftover(entry, n) for n in names):
+                with contextlib.suppress(OSError):
+                    if not os.path.isdir(d / entry):
+                        os.unlink(d / entry)
+
+
+def _journal_path(commit: Path) -> Path:
+    return _parent(commit) / f".{commit.name}{_JOURNAL}"
+
+
+def _digest(path: Path) -> str | None:
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    except OSError:
+        return None
+    return h.hexdigest()
+
+
+def _recover(commit: Path) -> None:
+    """Finish or undo the write a killed process left half done (its journal tells which)."""
+    jpath = _journal_path(commit)
+    if not jpath.is_file():
+        return
+    try:
+        doc = json.loads(jpath.read_text(encoding="utf-8"))
+        entries = [(Path(e["target"]), Path(e["backup"]) if e["backup"] else None, bool(e["existed"]))
+                   for e in doc["entries"]]
+        digest = doc["digest"]
+    except (OSError, ValueError, KeyError, TypeError):
+        jpath.unlink(missing_ok=True)  # a journal cut short: its write never began
+        return
+    committed = _digest(commit) == digest
+    for target, backup, existed in reversed(entries):
+        if committed:
+            if backup is not None:
+                backup.unlink(missing_ok=True)
+        elif backup is not None and backup.exists():
+            os.replace(backup, target)
+        elif not existed:
+            target.unlink(missing_ok=True)
+    for d in {_parent(t) for t, _, _ in entries}:
+        _fsync_dir(d)
+    jpath.unlink(missing_ok=True)
+    _fsync_dir(_parent(jpath))
+
+
+# ---------------------------------------------------------------------------------------------
+# Writers
+# ---------------------------------------------------------------------------------------------
+def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
+              commit: tuple[os.PathLike | str, bytes], *,
+              hide_first: Iterable[os.PathLike | str] = ()) -> None:
+    """Replace a set of files as one: afterwards all are new, or (on any failure) all are old.
+
+    Parameters
+    ----------
+    files : sequence of (path, bytes or None)
+        The files of the set, renamed into place in this order; ``None`` removes a file of the
+        previous set that the new set does not have.
+    commit : (path, bytes)
+        The file written last: while it is absent the set is incomplete, once it is in place
+        the write is done (a report, a ``truth.json``).
+    hide_first : paths, keyword-only
+        Targets among ``files`` to take away before any file is replaced (a map YAML whose
+        image keeps its name, so that the old YAML never names the new image).
+
+    Raises
+    ------
+    InputError
+        A folder is missing or read-only, a target is a folder, the disk is full, ...: one line
+        naming the file. Nothing is changed.
+    KeyboardInterrupt
+        (or :class:`fusionkit._signals.Terminated`) when interrupted before the commit point:
+        the old set is left whole.
+    """
+    items = [(Path(p), b) for p, b in files]
+    commit_path, commit_payload = Path(commit[0]), commit[1]
+    targets = [p for p, _ in items] + [commit_path]
+    resolved = [os.path.realpath(p) for p in targets]
+    if len(set(resolved)) != len(resolved):
+        dup = next(p for p, r in zip(targets, resolved) if resolved.count(r) > 1)
+        raise InputError(f"{_short(dup)}: is given as two outputs of one write; choose distinct paths")
+    for p in targets:
+        _check_target(p)
+    hide = {os.path.realpath(p) for p in hide_first}
+    token = secrets.token_hex(6)
+    staged: list[Path] = []
+    try:
+        with _locked(_parent(p) for p in targets):
+            _recover(commit_path)
+            _sweep(targets)
+            try:
+                for p, payload in items + [(commit_path, commit_payload)]:
+                    if payload is None:
+                        staged.append(None)
+                        continue
+                    tmp = _parent(p) / f".{p.name}.{token}{_TMP}"
+                    staged.append(tmp)
+                    _write_durable(tmp, payload)
+                with _signals.deferred():
+                    _commit(items, commit_path, commit_payload, staged, hide, token)
+            finally:
+                for tmp in staged:
+                    if tmp is not None:
+                        with contextlib.suppress(OSError):
+                            tmp.unlink()
+    except OSError as exc:
+        failed = Path(exc.filename) if getattr(exc, "filename", None) else commit_path
+        for t in targets:  # name the target, not its temporary file
+            if failed.name.startswith(f".{t.name}."):
+                failed = t
+        raise _write_error(failed, exc) from None
+
+
+def _commit(items, commit_path: Path, commit_payload: bytes, staged, hide, token) -> None:
+    entries = []
+    for p, _ in items + [(commit_path, None)]:
+        existed = os.path.lexists(p)
+        backup = _parent(p) / f".{p.name}.{token}{_BAK}" if existed else None
+        entries.append((p, backup, existed))
+    journal = _journal_path(commit_path)
+    jtmp = _parent(journal) / f".{commit_path.name}.{token}.journal{_TMP}"
+    _write_durable(jtmp, json.dumps({
+        "token": token, "digest": hashlib.sha256(commit_payload).hexdigest(),
+        "entries": [{"target": os.path.abspath(p), "backup": os.path.abspath(b) if b else None,
+                     "existed": e} for p, b, e in entries]}).encode())
+    os.replace(jtmp, journal)
+    dirs = {_parent(p) for p, _, _ in entries}
+    try:
+        for i, (p, backup, existed) in enumerate(entries):  # these go away first
+            if existed and (p == commit_path or os.path.realpath(p) in hide or staged[i] is None):
+                os.replace(p, backup)
+        for p, backup, existed in entries:  # every other old file keeps a backup
+            if existed and not backup.exists():
+                _backup_copy(p, backup)
+        for d in dirs:
+            _fsync_dir(d)
+        for (p, _, _), tmp in zip(entries[:-1], staged[:-1]):
+            if tmp is not None:
+                os.replace(tmp, p)
+        for d in dirs:
+            _fsync_dir(d)
+        if _signals.pending():
+            raise _Cancelled()
+        os.replace(staged[-1], commit_path)  # the commit point
+    except BaseException as exc:
+        if _rollback(entries):
+            journal.unlink(missing_ok=True)
+        for d in dirs:
+            _fsync_dir(d)
+        if isinstance(exc, _Cancelled):
+            return  # the held-back signal is delivered when the deferred block ends
+        raise
+    _fsync_dir(_parent(commit_path))
+    journal.unlink(missing_ok=True)
+    for _, backup, _ in entries:
+        if backup is not None:
+            with contextlib.suppress(OSError):
+                backup.unlink()
+    _fsync_dir(_parent(journal))
+
+
+class _Cancelled(Exception):
+    """A signal arrived before the commit point (raised and handled inside :func:`_commit`)."""
+
+
+def _backup_copy(target: Path, backup: Path) -> None:
+    try:
+        os.link(target, backup)
+    except OSError:
+        shutil.copy2(target, backup)
+
+
+def _rollback(entries) -> bool:
+    """Put every old file back; False when some step failed (the journal must then stay, so
+    that the next write to this output finishes the undo)."""
+    ok = True
+    for p, backup, existed in reversed(entries):
+        try:
+            if backup is not None and backup.exists():
+                os.replace(backup, p)
+            elif not existed:
+                p.unlink(missing_ok=True)
+        except OSError:
+            ok = False
+    return ok
 
 
 @contextlib.contextmanager
 def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path in the target's directory; on success rename it onto ``target``.
+    """Yield a temporary path beside ``target``; on success flush it and rename it onto ``target``.
 
-    On any exception the temporary file is removed and ``target`` is left as it was.
+    On any exception the temporary file is removed and ``target`` is left as it was; a
+    temporary file that a killed process left for the same target is removed first.
     """
     target = Path(target)
-    parent = target.parent if str(target.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"{target}: the output directory {parent} does not exist; create it first")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    _check_target(target)
+    tmp = _parent(target) / f".{target.name}.{secrets.token_hex(6)}{_TMP}"
     try:
-        yield tmp_path
-        os.chmod(tmp_path, 0o644)
-        os.replace(tmp_path, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
-        raise
+        with _locked([_parent(target)]):
+            _recover(target)
+            _sweep([target])
+            try:
+                yield tmp
+                with open(tmp, "rb+") as fh:
+                    os.fsync(fh.fileno())
+                os.chmod(tmp, 0o644)
+                with _signals.deferred():
+                    os.replace(tmp, target)
+                    _fsync_dir(_parent(target))
+            finally:
+                with contextlib.suppress(OSError):
+                    tmp.unlink()
+    except OSError as exc:
+        raise _write_error(target, exc) from None
 
 
 def write_bytes_atomic(target: str | os.PathLike, payload: bytes) -> None:
-    """Write ``payload`` to ``target`` atomically."""
-    with atomic_path(target) as tmp:
-        tmp.write_bytes(payload)
+    """Write ``payload`` to ``target`` atomically and durably (temporary file, fsync, rename)."""
+    write_set([], (target, payload))
 
 
 def write_text_atomic(target: str | os.PathLike, text: str) -> None:
@@ -47,17 +396,48 @@ def write_text_atomic(target: str | os.PathLike, text: str) -> None:
     write_bytes_atomic(target, text.encode("utf-8"))
 
 
+# ---------------------------------------------------------------------------------------------
+# Inputs are never outputs
+# ---------------------------------------------------------------------------------------------
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def check_not_input(outputs, inputs) -> None:
     """Raise :class:`InputError` when any output path is one of the input files.
 
-    fusionkit never overwrites an input; paths are compared after resolving links.
+    fusionkit never overwrites an input; paths are compared after resolving links (hard links
+    too).
     """
-    resolved = {Path(p).resolve(): str(p) for p in inputs}
+    resolved = {}
+    for p in inputs:
+        if p is not None:
+            resolved.setdefault(Path(p).resolve(), str(p))
     for out in outputs:
         if out is None:
             continue
         r = Path(out).resolve()
-        if r in resolved:
+        hit = resolved.get(r)
+        if hit is None and Path(out).exists():
+            hit = next((s for q, s in resolved.items() if _same_file(q, r)), None)
+        if hit is not None:
             raise InputError(
-                f"{out}: this output would overwrite the input {resolved[r]}; choose another output path"
-            )
+                f"{_short(out)}: this output would overwrite the input {_short(hit)}; "
+                f"choose another output path")
+
+
+def check_distinct(named_outputs: Sequence[tuple[str, os.PathLike | str]]) -> None:
+    """Raise :class:`InputError` when two outputs of one command are the same file
+    (``named_outputs``: ``(what, path)`` pairs, e.g. ``("--report", "r.json")``)."""
+    seen: dict[str, str] = {}
+    for what, p in named_outputs:
+        if p is None:
+            continue
+        r = os.path.realpath(p)
+        if r in seen:
+            raise InputError(f"{_short(p)}: {what} and {seen[r]} are the same file; "
+                             f"give them different paths")
+        seen[r] = what

@@ -37,13 +37,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ._atomic import atomic_path, check_not_input
-from .errors import InputError, MapFormatError
+from ._atomic import _short, check_not_input, show, write_set
+from ._inputs import read_bytes, regular_file
+from .errors import FusionkitError, InputError, MapFormatError
 from .grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from .mapping import MAX_CELLS
 from .scanlog import scans_path_for
 
-__all__ = ["load_map", "save_map", "map_info", "MAP_MODES", "IMAGE_FORMATS"]
+__all__ = ["load_map", "save_map", "save_maps", "encode_map", "map_info", "MAP_MODES",
+           "IMAGE_FORMATS", "MAX_IMAGE_BYTES"]
 
 #: Interpretations of the pixel values a map YAML may ask for with ``mode``.
 MAP_MODES = ("trinary", "scale", "raw")
@@ -54,6 +56,13 @@ _REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", 
 _YAML_SUFFIXES = (".yaml", ".yml")
 _MAX_YAML_BYTES = 1 << 20  # a map YAML is a few hundred bytes; anything this big is not one
 _MAX_HEADER_BYTES = 1 << 16  # PNM headers (with comments) longer than this are refused
+#: Most bytes a map image may decode to (width x height x channels x bytes per sample): a
+#: decompression bomb is refused from its header, before any pixel is decoded.
+MAX_IMAGE_BYTES = 800_000_000
+_MAX_PLAIN_PGM_PIXELS = 20_000_000  # P2 is text: ~40 bytes of memory per pixel while parsing
+#: Sane bounds of a map's geometry (a map YAML outside them is corrupt, not a map).
+_RESOLUTION_RANGE = (1e-9, 1e6)  # metres per pixel
+_ORIGIN_LIMIT = 1e9  # metres
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _WHITESPACE = b" \t\r\n\v\f"
 
@@ -80,36 +89,47 @@ class _MapYaml:
     mode: str
 
 
+def _safe_yaml(raw: bytes):
+    """``yaml.safe_load`` without aliases: ``*name`` references (the "billion laughs" bomb,
+    anchors expanding to gigabytes) are refused; a map YAML never needs one."""
+    import yaml  # PyYAML
+
+    class NoAliasLoader(yaml.SafeLoader):
+        def compose_node(self, parent, index):
+            if self.check_event(yaml.events.AliasEvent):
+                mark = self.peek_event().start_mark
+                raise yaml.composer.ComposerError(
+                    None, None, "an alias (*name); write the value out instead", mark)
+            return super().compose_node(parent, index)
+
+    loader = NoAliasLoader(raw)
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
 def _read_yaml(yaml_path: Path) -> _MapYaml:
     import yaml  # PyYAML
 
-    if not yaml_path.exists():
-        raise MapFormatError(f"{yaml_path}: no such map file; check the path")
-    if yaml_path.is_dir():
-        raise MapFormatError(f"{yaml_path}: is a directory, not a map YAML; give the path of the .yaml file")
-    try:
-        with open(yaml_path, "rb") as fh:
-            raw = fh.read(_MAX_YAML_BYTES + 1)
-    except OSError as exc:
-        raise MapFormatError(f"{yaml_path}: cannot be read ({exc.strerror or exc}); check its permissions") from None
+    if not yaml_path.exists() and not yaml_path.is_symlink():
+        raise MapFormatError(f"{_short(yaml_path)}: no such map file; check the path")
+    raw = read_bytes(yaml_path, "map YAML", _MAX_YAML_BYTES, MapFormatError)
     if raw[:2] in (b"P2", b"P5") or raw.startswith(_PNG_SIGNATURE):
         raise MapFormatError(
-            f"{yaml_path}: is an image, not a map YAML; give the .yaml file that names this image")
-    if len(raw) > _MAX_YAML_BYTES:
-        raise MapFormatError(
-            f"{yaml_path}: is larger than {_MAX_YAML_BYTES // 1024} KiB, too large to be a map YAML; "
-            f"give the map's .yaml file")
+            f"{_short(yaml_path)}: is an image, not a map YAML; give the .yaml file that names this image")
     try:
-        doc = yaml.safe_load(raw)
+        doc = _safe_yaml(raw)
     except yaml.YAMLError as exc:
         where = ""
         mark = getattr(exc, "problem_mark", None)
         if mark is not None:
             where = f" at line {mark.line + 1}, column {mark.column + 1}"
-        problem = getattr(exc, "problem", None) or "invalid syntax"
-        raise MapFormatError(f"{yaml_path}: is not valid YAML ({problem}{where}); fix the syntax") from None
-    except (UnicodeError, ValueError, RecursionError) as exc:
-        raise MapFormatError(f"{yaml_path}: is not valid YAML ({exc}); fix the file") from None
+        problem = show(getattr(exc, "problem", None) or "invalid syntax", 120).strip("'\"")
+        raise MapFormatError(f"{_short(yaml_path)}: is not valid YAML ({problem}{where}); fix the syntax") from None
+    except (UnicodeError, ValueError, RecursionError, OverflowError, MemoryError) as exc:
+        raise MapFormatError(f"{_short(yaml_path)}: is not valid YAML ({show(str(exc), 120)}); "
+                             f"fix the file") from None
     if not isinstance(doc, dict):
         raise MapFormatError(
             f"{yaml_path}: does not hold a map_server mapping (image, resolution, origin, negate, "
@@ -123,21 +143,32 @@ def _read_yaml(yaml_path: Path) -> _MapYaml:
 
     image = doc["image"]
     if not isinstance(image, str) or not image.strip():
-        raise MapFormatError(f"{yaml_path}: 'image' must be the file name of the map image, got {image!r}")
+        raise MapFormatError(f"{_short(yaml_path)}: 'image' must be the file name of the map image, "
+                             f"got {show(image)}")
+    if "\x00" in image or len(image.strip().encode()) > 4096:
+        raise MapFormatError(f"{_short(yaml_path)}: 'image' is not a usable file name "
+                             f"({show(image)}); fix the 'image' key")
     image_path = Path(image.strip())
     if not image_path.is_absolute():
         image_path = yaml_path.parent / image_path
 
     resolution = _number(doc["resolution"], "resolution", yaml_path)
-    if resolution <= 0:
+    lo, hi = _RESOLUTION_RANGE
+    if not lo <= resolution <= hi:
         raise MapFormatError(
-            f"{yaml_path}: 'resolution' must be a positive number of metres per pixel, got {doc['resolution']!r}")
+            f"{_short(yaml_path)}: 'resolution' must be a positive number of metres per pixel between "
+            f"{lo:g} and {hi:g}, got {show(doc['resolution'])}")
 
     origin = doc["origin"]
     if not isinstance(origin, (list, tuple)) or len(origin) != 3:
         raise MapFormatError(
-            f"{yaml_path}: 'origin' must be a list of 3 numbers [x, y, yaw] (m, m, rad), got {origin!r}")
+            f"{_short(yaml_path)}: 'origin' must be a list of 3 numbers [x, y, yaw] (m, m, rad), "
+            f"got {show(origin)}")
     origin = tuple(_number(v, "origin", yaml_path, whole=origin) for v in origin)
+    if max(abs(v) for v in origin) > _ORIGIN_LIMIT:
+        raise MapFormatError(
+            f"{_short(yaml_path)}: 'origin' must lie within {_ORIGIN_LIMIT:g} m (and rad) of 0, got "
+            f"{show(doc['origin'])}; fix the origin")
 
     negate = doc["negate"]
     if isinstance(negate, bool):
@@ -145,13 +176,13 @@ def _read_yaml(yaml_path: Path) -> _MapYaml:
     elif isinstance(negate, int) and negate in (0, 1):
         negate = bool(negate)
     else:
-        raise MapFormatError(f"{yaml_path}: 'negate' must be 0 or 1, got {negate!r}")
+        raise MapFormatError(f"{_short(yaml_path)}: 'negate' must be 0 or 1, got {show(negate)}")
 
     occ = _number(doc["occupied_thresh"], "occupied_thresh", yaml_path)
     free = _number(doc["free_thresh"], "free_thresh", yaml_path)
     for key, value in (("occupied_thresh", occ), ("free_thresh", free)):
         if not 0.0 <= value <= 1.0:
-            raise MapFormatError(f"{yaml_path}: '{key}' must lie in [0, 1], got {doc[key]!r}")
+            raise MapFormatError(f"{_short(yaml_path)}: '{key}' must lie in [0, 1], got {show(doc[key])}")
     if free >= occ:
         raise MapFormatError(
             f"{yaml_path}: 'free_thresh' ({free:g}) must be smaller than 'occupied_thresh' ({occ:g}); "
@@ -162,7 +193,7 @@ def _read_yaml(yaml_path: Path) -> _MapYaml:
         mode = "trinary"
     elif not isinstance(mode, str) or mode.strip().lower() not in MAP_MODES:
         raise MapFormatError(
-            f"{yaml_path}: unknown 'mode' {mode!r}; use one of {', '.join(MAP_MODES)} (or leave it out for trinary)")
+            f"{_short(yaml_path)}: unknown 'mode' {show(mode)}; use one of {', '.join(MAP_MODES)} (or leave it out for trinary)")
     else:
         mode = mode.strip().lower()
     return _MapYaml(yaml_path, image_path, resolution, origin, negate, occ, free, mode)
@@ -172,19 +203,21 @@ def _number(value, key: str, yaml_path: Path, whole=None) -> float:
     """A finite float from a YAML scalar (numbers, or strings that spell a number)."""
     shown = whole if whole is not None else value
     x = None
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
+    if isinstance(value, str) and len(value) > 100:
+        x = None
+    elif isinstance(value, (int, float)) and not isinstance(value, bool):
         try:
             x = float(value)
         except OverflowError:
             x = None
-    elif isinstance(value, str):
+    elif isinstance(value, str) and len(value) <= 100:
         try:
             x = float(value.strip())
         except ValueError:
             x = None
     if x is None or not math.isfinite(x):
         what = "a list of 3 finite numbers [x, y, yaw]" if key == "origin" else "a finite number"
-        raise MapFormatError(f"{yaml_path}: '{key}' must be {what}, got {shown!r}")
+        raise MapFormatError(f"{_short(yaml_path)}: '{key}' must be {what}, got {show(shown)}")
     return x
 
 
@@ -284,17 +317,27 @@ def _png_header(head: bytes, path: Path) -> _ImageHeader:
     width = int.from_bytes(head[16:20], "big")
     height = int.from_bytes(head[20:24], "big")
     _check_size(path, width, height)
+    depth, colour = (head[24], head[25]) if len(head) >= 26 else (8, 0)
+    channels = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}.get(colour)
+    if channels is None or depth not in (1, 2, 4, 8, 16):
+        raise MapFormatError(f"{_short(path)}: the PNG header is corrupt (colour type {colour}, bit depth "
+                             f"{depth}); re-export it")
+    decoded = width * height * channels * (2 if depth == 16 else 1)
+    if decoded > MAX_IMAGE_BYTES:
+        raise MapFormatError(
+            f"{_short(path)}: the PNG declares {width} x {height} pixels of {channels} channel(s) at "
+            f"{depth} bits, {decoded / 1e6:.0f} MB once decoded, more than the {MAX_IMAGE_BYTES / 1e6:.0f} MB "
+            f"fusionkit decodes; save the map as an 8-bit grey image or crop it")
     return _ImageHeader("PNG", width, height, 0, 0)
 
 
 def _image_header(path: Path) -> tuple[_ImageHeader, int]:
     """Identify the image and parse its header; returns the header and the file size (bytes)."""
+    regular_file(path, "map image", MapFormatError)
     try:
         with open(path, "rb") as fh:
             size = os.fstat(fh.fileno()).st_size
             head = fh.read(_MAX_HEADER_BYTES)
-    except IsADirectoryError:
-        raise MapFormatError(f"{path}: is a directory, not a map image; fix the 'image' key of the YAML") from None
     except OSError as exc:
         raise MapFormatError(f"{path}: the map image cannot be read ({exc.strerror or exc}); check its permissions") from None
     if head[:2] in (b"P5", b"P2"):
@@ -350,6 +393,10 @@ def _read_pixels(path: Path) -> tuple[np.ndarray, int]:
 
 def _read_plain_pgm(path: Path, header: _ImageHeader) -> np.ndarray:
     w, h = header.width, header.height
+    if w * h > _MAX_PLAIN_PGM_PIXELS:
+        raise MapFormatError(
+            f"{_short(path)}: a plain (P2, text) PGM of {w} x {h} pixels is too large to read (at most "
+            f"{_MAX_PLAIN_PGM_PIXELS} pixels); save it as a binary PGM (P5) or PNG")
     try:
         with open(path, "rb") as fh:
             fh.seek(header.offset)
@@ -565,6 +612,56 @@ def map_info(yaml_path) -> dict:
     }
 
 
+def encode_map(grid: OccupancyGrid, yaml_path, *, image_format: str = "pgm") -> tuple[Path, bytes, bytes]:
+    """The two files of a saved map, as bytes: ``(image_path, image_bytes, yaml_bytes)``.
+
+    What :func:`save_map` writes (see there), without writing it; for callers that write a map
+    as part of a larger set of files with :func:`save_maps`.
+    """
+    import cv2
+    import yaml
+
+    fmt = str(image_format).lower().lstrip(".")
+    if fmt not in IMAGE_FORMATS:
+        raise InputError(f"image format {show(image_format)} is not supported; use one of {', '.join(IMAGE_FORMATS)}")
+    yaml_path = Path(yaml_path)
+    if yaml_path.suffix.lower() not in _YAML_SUFFIXES:
+        raise InputError(f"{_short(yaml_path)}: a map must be saved to a .yaml (or .yml) file; change the output name")
+    if not isinstance(grid, OccupancyGrid):
+        raise InputError(f"{_short(yaml_path)}: save_map needs an OccupancyGrid, got {type(grid).__name__}")
+    if grid.data.size == 0:
+        raise InputError(f"{_short(yaml_path)}: the grid has no cells ({grid.rows} x {grid.cols}); there is nothing to save")
+    image_path = yaml_path.with_name(yaml_path.stem + "." + fmt)
+
+    states = grid.trinary()
+    pixels = np.full(states.shape, _PIXEL_UNKNOWN, np.uint8)
+    pixels[states == FREE] = _PIXEL_FREE
+    pixels[states == OCCUPIED] = _PIXEL_OCCUPIED
+    pixels = np.ascontiguousarray(pixels[::-1])  # grid row 0 (lowest y) is the image's bottom row
+    if fmt == "pgm":
+        head = f"P5\n# CREATOR: fusionkit {grid.resolution:.3f} m/pix\n{grid.cols} {grid.rows}\n255\n"
+        payload = head.encode("ascii") + pixels.tobytes()
+    else:
+        ok, buf = cv2.imencode(".png", pixels)
+        if not ok:
+            raise InputError(f"{_short(image_path)}: the PNG encoder failed; save as pgm instead")
+        payload = buf.tobytes()
+
+    text = yaml.safe_dump(
+        {
+            "image": image_path.name,
+            "mode": "trinary",
+            "resolution": float(grid.resolution),
+            "origin": [float(v) for v in grid.origin],
+            "negate": 0,
+            "occupied_thresh": _SAVE_OCCUPIED_THRESH,
+            "free_thresh": _SAVE_FREE_THRESH,
+        },
+        sort_keys=False, default_flow_style=None, allow_unicode=True,
+    )
+    return image_path, payload, text.encode("utf-8")
+
+
 def save_map(grid: OccupancyGrid, yaml_path, *, image_format: str = "pgm", inputs=()) -> None:
     """Write ``grid`` as a ``map_server`` map: ``NAME.yaml`` and ``NAME.pgm`` (or ``.png``) beside it.
 
@@ -592,59 +689,64 @@ def save_map(grid: OccupancyGrid, yaml_path, *, image_format: str = "pgm", input
     ------
     InputError
         Unknown ``image_format``, a YAML path without a .yaml/.yml suffix, an empty grid, an
-        output that would overwrite one of ``inputs``, or a missing output directory.
+        output that would overwrite one of ``inputs``, a missing or read-only output folder.
 
     Notes
     -----
-    Both files are written atomically (temporary file, then rename); on any failure neither
-    target is changed and no temporary file is left behind.
+    The pair is written as one set (:func:`save_maps`): the old YAML is taken away before the
+    new image is renamed into place and the new YAML comes last, so a YAML never names an
+    image of another write; on any failure or interrupt both files are left as they were.
     """
-    import cv2
-    import yaml
+    save_maps([(grid, yaml_path)], image_format=image_format, inputs=inputs)
 
-    fmt = str(image_format).lower().lstrip(".")
-    if fmt not in IMAGE_FORMATS:
-        raise InputError(f"image format {image_format!r} is not supported; use one of {', '.join(IMAGE_FORMATS)}")
-    yaml_path = Path(yaml_path)
-    if yaml_path.suffix.lower() not in _YAML_SUFFIXES:
-        raise InputError(f"{yaml_path}: a map must be saved to a .yaml (or .yml) file; change the output name")
-    if not isinstance(grid, OccupancyGrid):
-        raise InputError(f"{yaml_path}: save_map needs an OccupancyGrid, got {type(grid).__name__}")
-    if grid.data.size == 0:
-        raise InputError(f"{yaml_path}: the grid has no cells ({grid.rows} x {grid.cols}); there is nothing to save")
-    image_path = yaml_path.with_name(yaml_path.stem + "." + fmt)
-    check_not_input([yaml_path, image_path], _protected(inputs))
 
-    states = grid.trinary()
-    pixels = np.full(states.shape, _PIXEL_UNKNOWN, np.uint8)
-    pixels[states == FREE] = _PIXEL_FREE
-    pixels[states == OCCUPIED] = _PIXEL_OCCUPIED
-    pixels = np.ascontiguousarray(pixels[::-1])  # grid row 0 (lowest y) is the image's bottom row
-    if fmt == "pgm":
-        head = f"P5\n# CREATOR: fusionkit {grid.resolution:.3f} m/pix\n{grid.cols} {grid.rows}\n255\n"
-        payload = head.encode("ascii") + pixels.tobytes()
+def save_maps(maps, report=None, *, image_format: str = "pgm", inputs=(), remove=()) -> None:
+    """Write several maps and a report as one set of files (a merged map and its group maps).
+
+    Parameters
+    ----------
+    maps : sequence of (OccupancyGrid, yaml path)
+        The maps of the set; each is written as :func:`save_map` writes it.
+    report : (path, bytes or str), optional
+        A report written last, as the set's commit point: while it is absent the set is being
+        written (or a write was killed); once present every file of the set is of one write.
+        Without it, the first map's YAML is the commit point.
+    image_format : {"pgm", "png"}, keyword-only
+    inputs : iterable of paths, keyword-only
+        Files that must not be overwritten or removed (and, for a map YAML, the image it names).
+    remove : iterable of paths, keyword-only
+        Files of an earlier write of this set that the new set does not have (for example a
+        group map the new merge no longer finds); removed as part of the same commit.
+
+    Raises
+    ------
+    InputError
+        As :func:`save_map`; also two outputs of the set that are the same file.
+
+    Notes
+    -----
+    Crash safety (:func:`fusionkit._atomic.write_set`): a reader never finds files of two
+    writes together with the commit file; after a crash the next write to the same output
+    finishes or undoes the interrupted one; two writers to one output end with one whole set.
+    """
+    maps = [(g, Path(y)) for g, y in maps]
+    if not maps:
+        raise InputError("save_maps needs at least one map to write")
+    encoded = [encode_map(g, y, image_format=image_format) for g, y in maps]
+    files = [(img, payload) for img, payload, _ in encoded]
+    yamls = [(y, text) for (_, y), (_, _, text) in zip(maps, encoded)]
+    if report is not None:
+        rpath, rbytes = Path(report[0]), report[1]
+        commit = (rpath, rbytes.encode("utf-8") if isinstance(rbytes, str) else bytes(rbytes))
+        files += yamls
     else:
-        ok, buf = cv2.imencode(".png", pixels)
-        if not ok:
-            raise InputError(f"{image_path}: the PNG encoder failed; save as pgm instead")
-        payload = buf.tobytes()
-
-    text = yaml.safe_dump(
-        {
-            "image": image_path.name,
-            "mode": "trinary",
-            "resolution": float(grid.resolution),
-            "origin": [float(v) for v in grid.origin],
-            "negate": 0,
-            "occupied_thresh": _SAVE_OCCUPIED_THRESH,
-            "free_thresh": _SAVE_FREE_THRESH,
-        },
-        sort_keys=False, default_flow_style=None, allow_unicode=True,
-    )
-    # The image is renamed into place first, then the YAML that names it.
-    with atomic_path(yaml_path) as tmp_yaml, atomic_path(image_path) as tmp_image:
-        tmp_image.write_bytes(payload)
-        tmp_yaml.write_text(text, encoding="utf-8")
+        commit = yamls[0]
+        files += yamls[1:]
+    remove = [Path(p) for p in remove if p is not None and os.path.lexists(p)]
+    protected = _protected(inputs)
+    check_not_input([y for y, _ in yamls] + [p for p, _ in files] + [commit[0]] + remove, protected)
+    files += [(p, None) for p in remove]
+    write_set(files, commit, hide_first=[y for y, _ in yamls])
 
 
 def _protected(inputs) -> list[Path]:
@@ -657,14 +759,13 @@ def _protected(inputs) -> list[Path]:
             continue
         p = Path(p)
         out.append(p)
-        if p.suffix.lower() in _YAML_SUFFIXES and p.is_file():
+        if p.suffix.lower() in _YAML_SUFFIXES:
             try:
-                with open(p, "rb") as fh:
-                    doc = yaml.safe_load(fh.read(_MAX_YAML_BYTES))
+                doc = _safe_yaml(read_bytes(p, "map YAML", _MAX_YAML_BYTES))
                 image = doc.get("image") if isinstance(doc, dict) else None
-            except (OSError, yaml.YAMLError, UnicodeError, ValueError):
+            except (FusionkitError, yaml.YAMLError, UnicodeError, ValueError, RecursionError):
                 image = None
-            if isinstance(image, str) and image.strip():
+            if isinstance(image, str) and image.strip() and "\x00" not in image:
                 ip = Path(image.strip())
                 out.append(ip if ip.is_absolute() else p.parent / ip)
     return out
