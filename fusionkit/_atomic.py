@@ -37,7 +37,7 @@ from . import _signals
 from .errors import InputError
 
 __all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set",
-           "check_not_input", "check_distinct", "describe_os_error", "show"]
+           "check_not_input", "check_distinct", "check_writable", "describe_os_error", "show"]
 
 _TMP, _BAK, _JOURNAL = ".tmp", ".bak", ".journal"
 
@@ -384,6 +384,20 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
                     tmp.unlink()
     except OSError as exc:
         raise _write_error(target, exc) from None
+
+
+def check_writable(paths) -> None:
+    """Refuse, before any work, outputs that cannot be written: a missing or read-only folder,
+    a target that is a folder, an overlong name (one :class:`InputError` line)."""
+    for p in paths:
+        if p is None:
+            continue
+        p = Path(p)
+        _check_target(p)
+        parent = _parent(p)
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise InputError(f"{_short(p)}: the folder {_short(parent)} is not writable; check its "
+                             f"permissions or choose another output")
 
 
 def write_bytes_atomic(target: str | os.PathLike, payload: bytes) -> None:

@@ -749,6 +749,19 @@ def save_maps(maps, report=None, *, image_format: str = "pgm", inputs=(), remove
     write_set(files, commit, hide_first=[y for y, _ in yamls])
 
 
+def group_map_files(yaml_path) -> list[Path]:
+    """The group maps of a merge written beside ``yaml_path`` (``NAME.groupK.yaml`` and its
+    ``.pgm``/``.png``), found by name only (never by what a file says)."""
+    yaml_path = Path(yaml_path)
+    parent = yaml_path.parent if str(yaml_path.parent) else Path(".")
+    pattern = re.compile(re.escape(yaml_path.stem) + r"\.group[1-9][0-9]{0,3}\.(yaml|yml|pgm|png)")
+    try:
+        names = os.listdir(parent)
+    except OSError:
+        return []
+    return sorted(parent / n for n in names if pattern.fullmatch(n) and (parent / n).is_file())
+
+
 def _protected(inputs) -> list[Path]:
     """``inputs`` plus the image each input YAML names (so that it is not overwritten either)."""
     import yaml

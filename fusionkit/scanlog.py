@@ -19,7 +19,7 @@ import numpy as np
 from ._atomic import write_bytes_atomic
 from .errors import ScanLogError
 
-__all__ = ["ScanLog", "load_scans", "save_scans", "scans_path_for"]
+__all__ = ["ScanLog", "load_scans", "save_scans", "encode_scans", "scans_path_for"]
 
 _KEYS = ("poses", "ranges", "angle_min", "angle_increment", "range_max")
 
@@ -130,13 +130,18 @@ def scans_path_for(map_yaml) -> Path:
     return p.with_name(p.stem + ".scans.npz")
 
 
-def save_scans(path, log: ScanLog) -> None:
-    """Write ``log`` to ``path`` (``.scans.npz``) atomically, in the CONTRACTS section 3 layout."""
+def encode_scans(log: ScanLog) -> bytes:
+    """The bytes of ``log`` as a ``.scans.npz`` (CONTRACTS section 3), for writing in a set."""
     buf = io.BytesIO()
     np.savez_compressed(
         buf, poses=log.poses, ranges=log.ranges, angle_min=np.float64(log.angle_min),
         angle_increment=np.float64(log.angle_increment), range_max=np.float64(log.range_max))
-    write_bytes_atomic(path, buf.getvalue())
+    return buf.getvalue()
+
+
+def save_scans(path, log: ScanLog) -> None:
+    """Write ``log`` to ``path`` (``.scans.npz``) atomically, in the CONTRACTS section 3 layout."""
+    write_bytes_atomic(path, encode_scans(log))
 
 
 def load_scans(path) -> ScanLog:

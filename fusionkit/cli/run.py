@@ -6,7 +6,6 @@ import json
 import time
 from pathlib import Path
 
-from .._atomic import write_text_atomic
 from ._common import Progress, add_merge_options, int_range, merge_config_from_args
 
 
@@ -32,7 +31,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..mapio import load_map, save_map
+    from ..mapio import group_map_files, load_map, save_maps
     from ..metrics import format_table1, table1, transform_errors
     from ..pipeline import merge
     from ..simulate import SimulationConfig, simulate, write_run
@@ -59,9 +58,10 @@ def run(args) -> int:
     result = merge(inputs, config=config, callback=callback)
     progress.close()
     merged_path = out / "merged.yaml"
-    save_map(result.grid, merged_path, inputs=inputs)
-    write_text_atomic(out / "merged.report.json",
-                      json.dumps(result.report(inputs, output=str(merged_path)), indent=2) + "\n")
+    save_maps([(result.grid, merged_path)],
+              (out / "merged.report.json",
+               json.dumps(result.report(inputs, output=str(merged_path)), indent=2) + "\n"),
+              inputs=inputs, remove=group_map_files(merged_path))
 
     # Table 1: the fused map after each step, placed in the world by the reference's true pose
     ref_true = sim.robots[config.reference].transform
