@@ -37,7 +37,7 @@ from . import _signals
 from .errors import InputError
 
 __all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set",
-           "check_not_input", "check_distinct", "check_writable", "describe_os_error", "show"]
+           "check_not_input", "check_distinct", "check_writable", "check_out_dir", "make_out_dir", "describe_os_error", "show"]
 
 _TMP, _BAK, _JOURNAL = ".tmp", ".bak", ".journal"
 
@@ -398,6 +398,36 @@ def check_writable(paths) -> None:
         if not os.access(parent, os.W_OK | os.X_OK):
             raise InputError(f"{_short(p)}: the folder {_short(parent)} is not writable; check its "
                              f"permissions or choose another output")
+
+
+def check_out_dir(directory) -> Path:
+    """Refuse, before any work, an output folder that is a file or cannot be created or written
+    (one :class:`InputError` line); returns it as a Path. Nothing is created here."""
+    d = Path(directory)
+    if len(os.fsencode(d.name)) > 255:
+        raise InputError(f"{_short(d)}: the folder name is too long; use a shorter name")
+    if d.exists() and not d.is_dir():
+        raise InputError(f"{_short(d)}: is a file, not a folder; give a folder for the outputs")
+    probe = d
+    while not probe.exists() and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise InputError(f"{_short(d)}: {_short(probe)} is a file, not a folder; give another "
+                         f"output folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise InputError(f"{_short(d)}: the folder {_short(probe)} is not writable; check its "
+                         f"permissions or choose another output folder")
+    return d
+
+
+def make_out_dir(directory) -> Path:
+    """Create the output folder (and its parents) after :func:`check_out_dir`."""
+    d = check_out_dir(directory)
+    try:
+        d.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise _write_error(d, exc) from None
+    return d
 
 
 def write_bytes_atomic(target: str | os.PathLike, payload: bytes) -> None:

@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from collections import Counter
 from dataclasses import dataclass, field
@@ -53,11 +54,12 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from ._atomic import check_not_input, write_text_atomic
+from ._atomic import _short, check_not_input, check_out_dir, make_out_dir, write_set
+from ._inputs import regular_file
 from .errors import InputError
 from .grid import OccupancyGrid
 from .mapping import MappingConfig, build_grid
-from .scanlog import ScanLog, save_scans, scans_path_for
+from .scanlog import ScanLog, encode_scans, scans_path_for
 from .transform import Transform2D, wrap_angle
 
 __all__ = [
@@ -68,6 +70,10 @@ __all__ = [
 
 #: Readings this fraction below the no-return value count as no return (scanner error codes).
 NO_RETURN_BAND = 1e-3
+#: Longest line read (bytes); a longer one (no laser has that many beams) is skipped and counted.
+MAX_LINE_BYTES = 1 << 20
+#: Most range readings one log may hold (about 0.8 GB while converting); a larger log is refused.
+MAX_READINGS = 50_000_000
 
 ProgressFn = Callable[[int, int, str], None]
 
@@ -288,7 +294,7 @@ def _parse_flaser(tokens) -> _Scan:
     ranges, pose, stamp = vals[:n], vals[n:n + 3], vals[n + 6]
     _check(ranges, pose)
     amin, inc = flaser_geometry(n)
-    return _Scan(("FLASER", n, round(amin, 9), round(inc, 9)), ranges, pose, stamp, None)
+    return _Scan(("FLASER", n, round(amin, 9), round(inc, 9)), np.array(ranges), pose, stamp, None)
 
 
 def _parse_robotlaser(tokens) -> _Scan:
@@ -312,7 +318,7 @@ def _parse_robotlaser(tokens) -> _Scan:
     pose, stamp = rest[:3], rest[11]
     _check(ranges, pose)
     mr = max_range if math.isfinite(max_range) and max_range > 0 else None
-    return _Scan(("ROBOTLASER1", n, round(start, 9), round(res, 9)), ranges, pose, stamp, mr)
+    return _Scan(("ROBOTLASER1", n, round(start, 9), round(res, 9)), np.array(ranges), pose, stamp, mr)
 
 
 _PARSERS = {"FLASER": _parse_flaser, "ROBOTLASER1": _parse_robotlaser}
@@ -338,16 +344,15 @@ def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
     InputError
         The file cannot be read, or holds no usable FLASER or ROBOTLASER1 record.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: CARMEN log not found")
+    path = regular_file(path, "CARMEN log")
     skipped: Counter = Counter()
     scans: list[_Scan] = []
-    records = 0
+    records = readings = 0
     try:
-        with open(path, "r", encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                tokens = line.split()
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with open(fd, "rb") as fh:
+            for line in _lines(fh, skipped):
+                tokens = line.decode("utf-8", errors="replace").split()
                 if not tokens:
                     continue
                 records += 1
@@ -357,14 +362,21 @@ def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
                     continue
                 parser = _PARSERS.get(kind)
                 if parser is None:
-                    skipped[kind[:32]] += 1
+                    skipped[kind[:32] if kind.isprintable() and kind.isascii() else "unreadable"] += 1
                     continue
                 try:
-                    scans.append(parser(tokens))
+                    scan = parser(tokens)
                 except _Bad as bad:
                     skipped[bad.reason] += 1
+                    continue
+                readings += scan.ranges.size
+                if readings > MAX_READINGS:
+                    raise InputError(
+                        f"{_short(path)}: the log holds more than {MAX_READINGS:,} range readings, more "
+                        f"than fusionkit converts at once; cut it into parts and import each")
+                scans.append(scan)
     except OSError as exc:
-        raise InputError(f"{path}: cannot read the CARMEN log ({exc.strerror or exc})") from None
+        raise InputError(f"{_short(path)}: cannot read the CARMEN log ({exc.strerror or exc})") from None
     if not scans:
         raise InputError(f"{path}: no FLASER or ROBOTLASER1 records in the log "
                          f"({records} lines read); is this a CARMEN laser log?")
@@ -417,6 +429,23 @@ def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
     log = ScanLog(poses, ranges.astype(np.float32), amin, inc, range_max)
     stamps.setflags(write=False)
     return CarmenLog(log, stamps, stats, str(path))
+
+
+def _lines(fh, skipped: Counter):
+    """The lines of a binary file; a line longer than :data:`MAX_LINE_BYTES` is skipped (read
+    through in blocks, never held whole) and counted as ``too_long``."""
+    while True:
+        line = fh.readline(MAX_LINE_BYTES + 1)
+        if not line:
+            return
+        if len(line) > MAX_LINE_BYTES and not line.endswith(b"\n"):
+            while True:
+                rest = fh.readline(MAX_LINE_BYTES)
+                if not rest or rest.endswith(b"\n"):
+                    break
+            skipped["too_long"] += 1
+            continue
+        yield line
 
 
 # -- frames and sessions --------------------------------------------------------------------------
@@ -492,19 +521,29 @@ def check_outputs(paths, inputs, *, overwrite: bool) -> None:
                              f"directory or allow overwriting (--force)")
 
 
-def write_robot_files(out_dir, name: str, log: ScanLog, grid: OccupancyGrid,
-                      transform: Transform2D) -> ImportedMap:
-    """Write ``NAME.scans.npz``, ``NAME.yaml`` and ``NAME.pgm`` (each atomically)."""
-    from .mapio import save_map
+def _robot_files(out_dir, name: str, log: ScanLog, grid: OccupancyGrid,
+                 transform: Transform2D) -> tuple[ImportedMap, list]:
+    """What :func:`write_robot_files` writes, as ``(result, [(path, bytes), ...])`` with the
+    map's YAML last."""
+    from .mapio import encode_map
 
     yaml_path, pgm_path, npz_path = _outputs_for(Path(out_dir), name)
-    save_scans(npz_path, log)
-    save_map(grid, yaml_path)
+    image, pixels, text = encode_map(grid, yaml_path)
     counts = grid.counts()
-    return ImportedMap(name=name, scans=log.n_scans, transform=transform,
-                       path_length_m=path_length(log.poses), shape=tuple(grid.shape),
-                       occupied=counts["occupied"], free=counts["free"],
-                       files=(npz_path, yaml_path, pgm_path))
+    robot = ImportedMap(name=name, scans=log.n_scans, transform=transform,
+                        path_length_m=path_length(log.poses), shape=tuple(grid.shape),
+                        occupied=counts["occupied"], free=counts["free"],
+                        files=(npz_path, yaml_path, pgm_path))
+    return robot, [(npz_path, encode_scans(log)), (image, pixels), (yaml_path, text)]
+
+
+def write_robot_files(out_dir, name: str, log: ScanLog, grid: OccupancyGrid,
+                      transform: Transform2D) -> ImportedMap:
+    """Write ``NAME.scans.npz``, ``NAME.pgm`` and ``NAME.yaml`` as one set (the YAML is the
+    commit point: on any failure or interrupt the three files are left as they were)."""
+    robot, files = _robot_files(out_dir, name, log, grid, transform)
+    write_set(files[:-1], files[-1])
+    return robot
 
 
 def mapping_config(resolution: float, no_return_free: float) -> MappingConfig:
@@ -577,7 +616,7 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
     if split is not None and split > 1 and name is not None:
         raise InputError("a split writes robot_1 .. robot_K; leave out the map name")
     mcfg = mapping_config(resolution, no_return_free)
-    out_dir = Path(out_dir)
+    out_dir = check_out_dir(out_dir)
     carmen = read_carmen(path, config)
     log = carmen.scans
     split = split or 1
@@ -588,7 +627,7 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
         check_outputs(outputs, [path], overwrite=overwrite)
         own, t = to_own_frame(log)
         grid = build_grid(own, mcfg, name=nm)
-        out_dir.mkdir(parents=True, exist_ok=True)
+        make_out_dir(out_dir)
         robot = write_robot_files(out_dir, nm, own, grid, t)
         if progress:
             progress(1, 1, nm)
@@ -611,11 +650,17 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
         if progress:
             progress(i + 1, total, nm)
 
-    from .mapio import save_map
+    from .mapio import encode_map
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    robots = tuple(write_robot_files(out_dir, nm, own, g, t) for nm, own, g, t in built)
-    save_map(world_grid, world_yaml)
+    make_out_dir(out_dir)
+    robots, files = [], []
+    for nm, own, g, t in built:
+        robot, payloads = _robot_files(out_dir, nm, own, g, t)
+        robots.append(robot)
+        files += payloads
+    robots = tuple(robots)
+    image, pixels, text = encode_map(world_grid, world_yaml)
+    files += [(image, pixels), (world_yaml, text)]
     wc = world_grid.counts()
     world = ImportedMap("world", log.n_scans, Transform2D.identity(), path_length(log.poses),
                         tuple(world_grid.shape), wc["occupied"], wc["free"],
@@ -630,7 +675,10 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
                     "poses": r.scans, "path_length_m": round(r.path_length_m, 3)}
                    for r in robots],
     }
-    write_text_atomic(truth_path, json.dumps(truth, indent=2) + "\n")
+    # One set: images before the YAMLs naming them (YAMLs taken away first), truth.json last.
+    files.sort(key=lambda f: f[0].suffix == ".yaml")
+    write_set(files, (truth_path, (json.dumps(truth, indent=2) + "\n").encode("utf-8")),
+              hide_first=[p for p, _ in files if p.suffix == ".yaml"])
     if progress:
         progress(total, total, "world")
     files = tuple(p for r in robots for p in r.files) + world.files + (truth_path,)

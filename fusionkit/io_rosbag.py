@@ -43,6 +43,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
+from ._atomic import check_out_dir, make_out_dir
 from .errors import InputError
 from .io_carmen import (ImportedMap, check_name, check_outputs, default_name, mapping_config,
                         to_own_frame, write_robot_files)
@@ -316,6 +317,19 @@ def _bag_path(path) -> Path:
         raise InputError(f"{p}: not a ROS bag (expected a ROS 1 .bag file or a ROS 2 bag "
                          f"directory)")
     return p
+
+
+def _bag_files(path) -> list[Path]:
+    """The bag and, for a ROS 2 bag folder, every file in it (all are inputs, never outputs)."""
+    p = Path(path)
+    files = [p]
+    folder = p if p.is_dir() else (p.parent if p.suffix in (".db3", ".mcap") else None)
+    if folder is not None and (folder / "metadata.yaml").is_file():
+        try:
+            files += [folder / n for n in os.listdir(folder)]
+        except OSError:
+            pass
+    return files
 
 
 def _reader_errors():
@@ -644,10 +658,10 @@ def import_rosbag(path, out_dir, *, scan_topic: str, poses: PoseSource, name: st
         ``progress(done, total, label)``.
     """
     nm = check_name(name or default_name(path))
-    out_dir = Path(out_dir)
+    out_dir = check_out_dir(out_dir)
     yaml_path = out_dir / f"{nm}.yaml"
     outputs = [yaml_path, yaml_path.with_suffix(".pgm"), out_dir / f"{nm}.scans.npz"]
-    check_outputs(outputs, [path], overwrite=overwrite)
+    check_outputs(outputs, _bag_files(path), overwrite=overwrite)
     bag = read_rosbag(path, scan_topic, poses, progress=progress)
     log = bag.scans
     if keep_frame:
@@ -656,7 +670,7 @@ def import_rosbag(path, out_dir, *, scan_topic: str, poses: PoseSource, name: st
         own, t = to_own_frame(log)
     free = own.range_max if no_return_free is None else no_return_free
     grid = build_grid(own, mapping_config(resolution, free), name=nm)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_out_dir(out_dir)
     robot = write_robot_files(out_dir, nm, own, grid, t)
     return BagImport(bag.stats, robot, robot.files)
 
