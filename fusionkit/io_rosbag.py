@@ -43,7 +43,8 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from ._atomic import check_out_dir, make_out_dir
+from ._atomic import check_out_dir, check_writable, make_out_dir
+from ._inputs import regular_file
 from .errors import InputError
 from .io_carmen import (ImportedMap, check_name, check_outputs, default_name, mapping_config,
                         to_own_frame, write_robot_files)
@@ -313,9 +314,15 @@ def _bag_path(path) -> Path:
         return p.parent
     if p.is_dir() and not (p / "metadata.yaml").is_file():
         raise InputError(f"{p}: a ROS 2 bag directory needs its metadata.yaml; is this a bag?")
+    if not p.is_dir():
+        regular_file(p, "ROS bag")
     if p.is_file() and p.suffix != ".bag":
         raise InputError(f"{p}: not a ROS bag (expected a ROS 1 .bag file or a ROS 2 bag "
                          f"directory)")
+    if p.is_dir():
+        for f in p.iterdir():
+            if f.suffix in (".db3", ".mcap", ".yaml"):
+                regular_file(f, "file of the ROS 2 bag")
     return p
 
 
@@ -860,9 +867,11 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir():
         raise InputError(f"{out}: the output directory {parent} does not exist; create it first")
+    check_writable([out])
     robots = _run_robots(run_dir)
 
-    tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
+    _sweep_dead_exports(parent, out.name)
+    tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
     try:
         tmp = tmpdir / out.name
         result = _write_bag(tmp, robots, ros1, storage, rate, start_s, progress)
@@ -877,6 +886,30 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)
     return BagExport(out, fmt, "bag" if ros1 else storage, result[0], result[1], result[2])
+
+
+def _sweep_dead_exports(parent: Path, name: str) -> None:
+    """Remove the temporary folders of exports to ``name`` whose process is gone (killed)."""
+    pattern = re.compile(re.escape(f".{name}.") + r"(\d+)\.[A-Za-z0-9_]+\.tmp")
+    try:
+        entries = os.listdir(parent)
+    except OSError:
+        return
+    for entry in entries:
+        m = pattern.fullmatch(entry)
+        if m is None or _alive(int(m.group(1))):
+            continue
+        shutil.rmtree(parent / entry, ignore_errors=True)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
 
 
 def _write_bag(path: Path, robots, ros1: bool, storage: str, rate: float, start_s: float,

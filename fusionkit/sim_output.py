@@ -7,11 +7,11 @@ import json
 import re
 from pathlib import Path
 
-from ._atomic import check_not_input, write_set
+from ._atomic import check_not_input, check_out_dir, make_out_dir, write_set
 from .errors import FusionkitError, InputError
 from .mapping import MappingConfig
 
-__all__ = ["write_run"]
+__all__ = ["write_run", "check_run_dir"]
 
 
 _RUN_SUFFIXES = (".yaml", ".pgm", ".scans.npz")
@@ -37,6 +37,22 @@ def _previous_robot_files(out: Path) -> list[Path]:
         if isinstance(n, str) and _ROBOT_NAME.fullmatch(n):
             files += [out / (n + s) for s in _RUN_SUFFIXES]
     return files
+
+
+def check_run_dir(out_dir) -> Path:
+    """Refuse, before any work, a run folder :func:`write_run` would not write: a file, a folder
+    that is not writable, or a non-empty folder without the truth.json of an earlier run."""
+    out = check_out_dir(out_dir)
+    try:
+        nonempty = out.is_dir() and any(out.iterdir())
+    except OSError as exc:
+        raise InputError(f"{out}: the folder cannot be listed ({exc.strerror or exc}); check its "
+                         f"permissions") from None
+    if nonempty and not (out / "truth.json").is_file():
+        raise InputError(
+            f"{out}: the directory is not empty and holds no truth.json of an earlier run; "
+            f"choose a new or empty directory")
+    return out
 
 
 def write_run(sim, out_dir, *, world_path=None) -> Path:
@@ -78,16 +94,8 @@ def write_run(sim, out_dir, *, world_path=None) -> Path:
 
     if not isinstance(sim, Simulation):
         raise InputError(f"write_run needs a Simulation, got {type(sim).__name__}")
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError(f"{out}: exists and is not a directory; give a directory for the run")
-    previous: list[Path] = []
-    if out.is_dir() and any(out.iterdir()):
-        if not (out / "truth.json").is_file():
-            raise InputError(
-                f"{out}: the directory is not empty and holds no truth.json of an earlier run; "
-                f"choose a new or empty directory")
-        previous = _previous_robot_files(out)
+    out = check_run_dir(out_dir)
+    previous = _previous_robot_files(out) if out.is_dir() else []
     names = [r.name for r in sim.robots]
     files = [n + s for n in names for s in _RUN_SUFFIXES] + ["world.yaml", "world.pgm", "truth.json"]
     protected: list[Path] = []
@@ -98,10 +106,7 @@ def write_run(sim, out_dir, *, world_path=None) -> Path:
     inputs = {q.resolve() for q in protected}
     stale = [p for p in previous if p not in keep and p.is_file() and p.resolve() not in inputs]
 
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{out}: cannot create the run directory ({exc.strerror or exc})") from None
+    make_out_dir(out)
     payloads = []
     yamls = []
     robots = []

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import time
-from pathlib import Path
 
 from ._common import Progress, add_merge_options, int_range, merge_config_from_args
 
@@ -34,11 +33,12 @@ def run(args) -> int:
     from ..mapio import group_map_files, load_map, save_maps
     from ..metrics import format_table1, table1, transform_errors
     from ..pipeline import merge
+    from ..sim_output import check_run_dir
     from ..simulate import SimulationConfig, simulate, write_run
     from ..worlds import default_world
     from .merge import format_placements
 
-    out = Path(args.out)
+    out = check_run_dir(args.out)  # before any work
     world = load_map(args.world) if args.world else default_world()
     sim_cfg = SimulationConfig(robots=args.robots, poses=args.poses, seed=args.sim_seed)
     t0 = time.perf_counter()
