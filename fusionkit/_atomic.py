@@ -206,7 +206,7 @@ def _recover(commit: Path) -> None:
             if backup is not None:
                 backup.unlink(missing_ok=True)
         elif backup is not None and backup.exists():
-            os.replace(backup, target)
+            _restore(backup, target)
         elif not existed:
             target.unlink(missing_ok=True)
     for d in {_parent(t) for t, _, _ in entries}:
@@ -291,15 +291,21 @@ def _commit(items, commit_path: Path, commit_payload: bytes, staged, hide, token
         entries.append((p, backup, existed))
     journal = _journal_path(commit_path)
     jtmp = _parent(journal) / f".{commit_path.name}.{token}.journal{_TMP}"
-    _write_durable(jtmp, json.dumps({
-        "token": token, "digest": hashlib.sha256(commit_payload).hexdigest(),
-        "entries": [{"target": os.path.abspath(p), "backup": os.path.abspath(b) if b else None,
-                     "existed": e} for p, b, e in entries]}).encode())
-    os.replace(jtmp, journal)
+    try:
+        _write_durable(jtmp, json.dumps({
+            "token": token, "digest": hashlib.sha256(commit_payload).hexdigest(),
+            "entries": [{"target": os.path.abspath(p), "backup": os.path.abspath(b) if b else None,
+                         "existed": e} for p, b, e in entries]}).encode())
+        os.replace(jtmp, journal)
+    finally:
+        with contextlib.suppress(OSError):
+            jtmp.unlink()
     dirs = {_parent(p) for p, _, _ in entries}
     try:
-        for i, (p, backup, existed) in enumerate(entries):  # these go away first
-            if existed and (p == commit_path or os.path.realpath(p) in hide or staged[i] is None):
+        last = len(entries) - 1  # the commit file goes away first, then the hidden files
+        for i in [last] + list(range(last)):
+            p, backup, existed = entries[i]
+            if existed and (i == last or os.path.realpath(p) in hide or staged[i] is None):
                 os.replace(p, backup)
         for p, backup, existed in entries:  # every other old file keeps a backup
             if existed and not backup.exists():
@@ -342,6 +348,15 @@ def _backup_copy(target: Path, backup: Path) -> None:
         shutil.copy2(target, backup)
 
 
+def _restore(backup: Path, target: Path) -> None:
+    """Put ``backup`` back as ``target`` (a hard-link backup of an untouched target is simply
+    dropped: renaming a link onto the same file does nothing)."""
+    if os.path.lexists(target) and os.path.samefile(backup, target):
+        backup.unlink()
+    else:
+        os.replace(backup, target)
+
+
 def _rollback(entries) -> bool:
     """Put every old file back; False when some step failed (the journal must then stay, so
     that the next write to this output finishes the undo)."""
@@ -349,7 +364,7 @@ def _rollback(entries) -> bool:
     for p, backup, existed in reversed(entries):
         try:
             if backup is not None and backup.exists():
-                os.replace(backup, p)
+                _restore(backup, p)
             elif not existed:
                 p.unlink(missing_ok=True)
         except OSError:
