@@ -299,3 +299,84 @@ def test_a_killed_write_leaves_no_map_naming_an_image_of_another_write(tmp_path)
     save_map(OLD["merged"], out / "merged.yaml")  # the next write recovers and writes
     assert _same(load_map(out / "merged.yaml"), OLD["merged"])
     assert sorted(p.name for p in out.iterdir()) == ["merged.pgm", "merged.yaml"]
+
+
+# -- the command line: one line, exit 130 / 143, nothing half-written ---------------------------
+_CLI = textwrap.dedent("""
+    import os, signal, sys
+    from fusionkit import _atomic
+    k, how, argv = int(sys.argv[1]), sys.argv[2], sys.argv[3:]
+    real, calls = os.replace, []
+    def signalled(src, dst):
+        calls.append(dst)
+        if len(calls) == k:
+            os.kill(os.getpid(), getattr(signal, how))
+        return real(src, dst)
+    if k:
+        _atomic.os.replace = signalled
+    else:  # while computing, before anything is written
+        import fusionkit.simulate as sim
+        compute = sim.simulate
+        def interrupted(*a, **kw):
+            os.kill(os.getpid(), getattr(signal, how))
+            return compute(*a, **kw)
+        sim.simulate = interrupted
+    from fusionkit.cli import main
+    sys.exit(main(argv))
+""")
+
+
+def _files(folder: Path) -> dict:
+    return {p.name: p.read_bytes() for p in folder.iterdir()}
+
+
+@pytest.fixture(scope="module")
+def earlier_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "run"
+    from fusionkit.cli import main
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        assert main(["simulate", "--robots", "2", "--poses", "40", "--seed", "1", "--out", str(out),
+                     "--quiet"]) == 0
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    return out
+
+
+@pytest.mark.parametrize("k, how, code", [(0, "SIGINT", 130), (0, "SIGTERM", 143),
+                                          (6, "SIGTERM", 143), (9, "SIGINT", 130)],
+                         ids=["SIGINT computing", "SIGTERM computing", "SIGTERM mid-commit",
+                              "SIGINT mid-commit"])
+def test_a_signalled_command_exits_130_or_143_with_one_line_and_its_outputs_unchanged(
+        earlier_run, k, how, code):
+    before = _files(earlier_run)
+    env = {**os.environ, "NUMBA_THREADING_LAYER": "threadsafe"}
+    proc = subprocess.run(
+        [sys.executable, "-c", _CLI, str(k), how, "simulate", "--robots", "3", "--poses", "40",
+         "--seed", "2", "--out", str(earlier_run), "--quiet"],
+        capture_output=True, text=True, timeout=300, env=env, cwd=ROOT)
+    assert proc.returncode == code, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[0].startswith("fusionkit simulate: " + ("terminated" if how == "SIGTERM" else "interrupted"))
+    assert _files(earlier_run) == before
+
+
+def test_ctrl_c_during_start_up_is_one_line_and_exit_130(monkeypatch, capsys):
+    import importlib
+
+    from fusionkit import cli
+
+    def interrupted(name, package=None):
+        raise KeyboardInterrupt()
+
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    monkeypatch.setattr(importlib, "import_module", interrupted)
+    try:
+        assert cli.main(["merge", "a.yaml", "b.yaml", "-o", "m.yaml"]) == 130
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("fusionkit: interrupted")
