@@ -116,6 +116,9 @@ def _parent(path: Path) -> Path:
 
 
 def _check_target(path: Path) -> None:
+    if len(os.fsencode(path.name)) > 200:
+        raise InputError(f"{_short(path)}: the file name is {len(os.fsencode(path.name))} bytes long; "
+                         f"use a name of at most 200 bytes")
     parent = _parent(path)
     if not parent.is_dir():
         if parent.exists():
@@ -125,9 +128,6 @@ def _check_target(path: Path) -> None:
                          f"create it first")
     if path.is_dir():
         raise InputError(f"{_short(path)}: is an existing folder; give a file name for the output")
-    if len(path.name.encode()) > 200:
-        raise InputError(f"{_short(path)}: the file name is {len(path.name.encode())} bytes long; "
-                         f"use a name of at most 200 bytes")
 
 
 @contextlib.contextmanager

@@ -30,7 +30,7 @@ def regular_file(path, what: str, error=InputError) -> Path:
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        raise error(f"{_short(path)}: no such {what}; check the path") from None
+        raise error(f"{_short(path)}: no such {what} file; check the path") from None
     except OSError as exc:
         raise error(f"{_short(path)}: the {what} cannot be read ({exc.strerror or exc}); "
                     f"check the path and its permissions") from None

@@ -112,9 +112,7 @@ def _safe_yaml(raw: bytes):
 def _read_yaml(yaml_path: Path) -> _MapYaml:
     import yaml  # PyYAML
 
-    if not yaml_path.exists() and not yaml_path.is_symlink():
-        raise MapFormatError(f"{_short(yaml_path)}: no such map file; check the path")
-    raw = read_bytes(yaml_path, "map YAML", _MAX_YAML_BYTES, MapFormatError)
+    raw = read_bytes(yaml_path, "map", _MAX_YAML_BYTES, MapFormatError)
     if raw[:2] in (b"P2", b"P5") or raw.startswith(_PNG_SIGNATURE):
         raise MapFormatError(
             f"{_short(yaml_path)}: is an image, not a map YAML; give the .yaml file that names this image")

@@ -46,9 +46,9 @@ def run(args) -> int:
     if len(args.maps) < 2:
         raise InputError("give at least two maps to merge")
     inputs = list(args.maps)
+    check_writable([out, image_path, report_path])
     check_distinct([("-o", out), ("the output's image", image_path), ("--report", report_path)])
     check_not_input([out, image_path, report_path], protected_inputs(inputs))
-    check_writable([out, image_path, report_path])
     reference = 0
     if args.reference is not None:
         if args.reference not in inputs:
