@@ -55,7 +55,7 @@ def check_run_dir(out_dir) -> Path:
     return out
 
 
-def write_run(sim, out_dir, *, world_path=None) -> Path:
+def write_run(sim, out_dir, *, world_path=None, stale=()) -> Path:
     """Write a simulation as CONTRACTS section 5 lays it out, and return the truth.json path.
 
     Files, in ``out_dir``: per robot ``robot_k.yaml`` + ``robot_k.pgm`` (its map, own frame)
@@ -75,6 +75,9 @@ def write_run(sim, out_dir, *, world_path=None) -> Path:
     world_path : str or os.PathLike, optional
         The map file the world was loaded from; it is recorded, and never overwritten or
         removed (nor the image it names, nor a scan log beside it).
+    stale : paths, optional
+        Files made from the earlier run that the new run makes wrong (a merged map of the old
+        robots); removed with the same commit.
 
     Raises
     ------
@@ -104,7 +107,8 @@ def write_run(sim, out_dir, *, world_path=None) -> Path:
     check_not_input([out / f for f in files], protected)
     keep = {out / f for f in files}
     inputs = {q.resolve() for q in protected}
-    stale = [p for p in previous if p not in keep and p.is_file() and p.resolve() not in inputs]
+    stale = [p for p in [*previous, *map(Path, stale)]
+             if p not in keep and p.is_file() and p.resolve() not in inputs]
 
     make_out_dir(out)
     payloads = []

@@ -45,7 +45,11 @@ def run(args) -> int:
     progress = Progress("simulating")
     sim = simulate(world, sim_cfg, progress=progress)
     progress.close()
-    write_run(sim, out, world_path=args.world)
+    merged_path = out / "merged.yaml"
+    # The merged set of an earlier run goes with its robots (until this run's merge replaces it).
+    write_run(sim, out, world_path=args.world,
+              stale=[merged_path, merged_path.with_suffix(".pgm"), out / "merged.report.json",
+                     *group_map_files(merged_path)])
     t_sim = time.perf_counter() - t0
     names = [f"robot_{k + 1}.yaml" for k in range(args.robots)]
     inputs = [str(out / n) for n in names]
@@ -57,7 +61,6 @@ def run(args) -> int:
 
     result = merge(inputs, config=config, callback=callback)
     progress.close()
-    merged_path = out / "merged.yaml"
     save_maps([(result.grid, merged_path)],
               (out / "merged.report.json",
                json.dumps(result.report(inputs, output=str(merged_path)), indent=2) + "\n"),
