@@ -261,9 +261,9 @@ def test_a_write_error_is_one_line_and_leaves_nothing(folder, capsys, monkeypatc
 
 
 def test_an_overlong_carmen_line_is_skipped_and_counted_not_held(folder, capsys, monkeypatch):
-    from fusionkit import io_carmen
+    from fusionkit import carmen_read
 
-    monkeypatch.setattr(io_carmen, "MAX_LINE_BYTES", 4096)
+    monkeypatch.setattr(carmen_read, "MAX_LINE_BYTES", 4096)
     log = folder / "r.log"
     good = "".join(f"FLASER 4 1 2 3 1.5 {i * 0.1} 0 0 {i * 0.1} 0 0 {i} h {i}\n" for i in range(30))
     log.write_text(good + "FLASER 200000 " + "1.0 " * 200_000 + "\n" + good.replace("FLASER", "FLASER", 1))
