@@ -13,7 +13,10 @@ import contextlib
 import os
 import signal
 import threading
-from typing import Iterator
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
 
 __all__ = ["Terminated", "install", "deferred", "pending", "EXIT_SIGINT", "EXIT_SIGTERM"]
 

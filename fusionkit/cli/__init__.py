@@ -13,7 +13,6 @@ import importlib
 import sys
 
 from .. import _signals
-from .._atomic import show
 from ..errors import FusionkitError
 
 __all__ = ["main", "build_parser"]
@@ -64,6 +63,8 @@ def main(argv=None) -> int:
         _quiet_stdout()
         return 0
     except OSError as exc:
+        from .._atomic import show
+
         where = f"{show(str(exc.filename), 200)}: " if exc.filename else ""
         _say(f"{command}: error: {where}{exc.strerror or exc.__class__.__name__}; check the path, "
              f"its permissions and the free disk space")
