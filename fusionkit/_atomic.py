@@ -187,16 +187,29 @@ def _digest(path: Path) -> str | None:
     return h.hexdigest()
 
 
-def _recover(commit: Path) -> None:
-    """Finish or undo the write a killed process left half done (its journal tells which)."""
+def _recover(commit: Path, targets: Iterable[Path] = ()) -> None:
+    """Finish or undo the write a killed process left half done (its journal tells which).
+
+    Only entries that a write of this output can have made are acted on: a target beside the
+    journal or among ``targets`` (this write's files), with its backup beside it under the
+    journal's token; anything else in the journal is ignored.
+    """
     jpath = _journal_path(commit)
     if not jpath.is_file():
         return
+    allowed_dirs = {os.path.realpath(_parent(jpath))} | {os.path.realpath(_parent(Path(t))) for t in targets}
     try:
         doc = json.loads(jpath.read_text(encoding="utf-8"))
-        entries = [(Path(e["target"]), Path(e["backup"]) if e["backup"] else None, bool(e["existed"]))
-                   for e in doc["entries"]]
-        digest = doc["digest"]
+        token, digest = str(doc["token"]), doc["digest"]
+        entries = []
+        for e in doc["entries"]:
+            target = Path(e["target"])
+            backup = Path(e["backup"]) if e["backup"] else None
+            if os.path.realpath(_parent(target)) not in allowed_dirs:
+                continue
+            if backup is not None and backup != _parent(target) / f".{target.name}.{token}{_BAK}":
+                continue
+            entries.append((target, backup, bool(e["existed"])))
     except (OSError, ValueError, KeyError, TypeError):
         jpath.unlink(missing_ok=True)  # a journal cut short: its write never began
         return
@@ -258,7 +271,7 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
     staged: list[Path] = []
     try:
         with _locked(_parent(p) for p in targets):
-            _recover(commit_path)
+            _recover(commit_path, targets)
             _sweep(targets)
             try:
                 for p, payload in items + [(commit_path, commit_payload)]:

@@ -91,7 +91,7 @@ def load_map(yaml_path) -> OccupancyGrid:
     """
     yaml_path = Path(yaml_path)
     meta = _read_yaml(yaml_path)
-    if not meta.image.exists():
+    if not os.path.lexists(meta.image):
         raise MapFormatError(
             f"{yaml_path}: the image {meta.image} it names does not exist; fix the 'image' key or "
             f"restore the file")
@@ -125,7 +125,7 @@ def map_info(yaml_path) -> dict:
     """
     yaml_path = Path(yaml_path)
     meta = _read_yaml(yaml_path)
-    if not meta.image.exists():
+    if not os.path.lexists(meta.image):
         raise MapFormatError(
             f"{yaml_path}: the image {meta.image} it names does not exist; fix the 'image' key or "
             f"restore the file")
