@@ -380,3 +380,24 @@ def test_ctrl_c_during_start_up_is_one_line_and_exit_130(monkeypatch, capsys):
             signal.signal(s, h)
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("fusionkit: interrupted")
+
+
+def test_an_export_sweeps_the_temporary_folder_a_killed_export_left(tmp_path):
+    from fusionkit.rosbag_export import export_rosbag
+    from fusionkit.scanlog import ScanLog, save_scans
+
+    run = tmp_path / "run"
+    run.mkdir()
+    rng = np.random.default_rng(0)
+    save_scans(run / "robot_1.scans.npz", ScanLog(rng.normal(size=(4, 3)), rng.uniform(1, 2, (4, 6)),
+                                                   -1.0, 0.4, 5.0))
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    killed = tmp_path / f".run_bag.{int(dead.stdout)}.abc123.tmp"  # what a killed export leaves
+    (killed / "run_bag").mkdir(parents=True)
+    (killed / "run_bag" / "run_bag_0.db3").write_bytes(b"half")
+    mine = tmp_path / f".run_bag.{os.getpid()}.xyz789.tmp"  # a live export's folder is left alone
+    mine.mkdir()
+    res = export_rosbag(run, tmp_path / "run_bag")
+    assert res.path.is_dir() and not killed.exists() and mine.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [mine.name, "run", "run_bag"]
