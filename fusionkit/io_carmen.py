@@ -1,43 +1,9 @@
-"""Real laser logs in the CARMEN format, turned into fusionkit robot logs (CONTRACTS section 3).
+"""CARMEN laser logs turned into fusionkit robot logs and maps (CONTRACTS sections 3 and 5).
 
-A CARMEN log is plain text, one record per line, the record type first. Two record types carry
-a laser scan with a pose and are read here:
-
-``FLASER n r_1 .. r_n x y theta odom_x odom_y odom_theta timestamp host logger_timestamp``
-    ``n`` ranges (m) of a front laser covering 180 degrees counter-clockwise from -90 degrees
-    (right) to +90 degrees (left) of the heading; ``x y theta`` is the laser pose (m, rad).
-    The beam angles follow one rule (see :func:`flaser_geometry`): an even ``n`` has ``n``
-    steps of ``180 / n`` degrees starting at -90 (intel: 180 beams, the last at +89 degrees),
-    an odd ``n`` runs from -90 to +90 inclusive in ``180 / (n - 1)`` degree steps (orebro:
-    181 beams).
-``ROBOTLASER1 laser_type start_angle fov angular_res max_range accuracy remission_mode
-n r_1 .. r_n m e_1 .. e_m laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
-forward_safety side_safety turn_axis timestamp host logger_timestamp``
-    Angles in radians; the scan's own geometry and maximum range are in the record, and the
-    laser pose (not the robot pose) is the sensor pose stored.
-
-Every other record type (``ODOM``, ``NEFF``, ``PARAM``, ``RAWLASER1``, comments starting with
-``#``, ...) is skipped and counted by type, as are lines cut short or holding values that are
-not numbers, and scans whose beam count (or angles) differ from the log's dominant scans.
-
-No return
-    A SICK scanner writes its maximum value when a beam returns nothing (intel: 81.83 m,
-    orebro: 32.767 m) and a few error codes just below it (orebro: 32.759, 32.763, 32.765).
-    The no-return value is the largest reading when it occurs more than once and is not the
-    only value (for ``ROBOTLASER1``: the record's ``max_range``); it and every reading within
-    0.1 % below it become ``inf``. With ``max_range`` given, FLASER readings at or beyond it
-    are no return instead (no detection), and ROBOTLASER1 readings at or beyond either value.
-    ``range_max`` of the scan log is ``max_range`` when given, else the largest remaining
-    reading, capped at ``range_cap`` (40 m).
-
-Time order
-    Scans are sorted by their timestamp (a stable sort: equal timestamps, for example a log
-    whose timestamps are all 0, keep the file order); how many were out of order is counted.
-
-Frames
-    Poses are re-expressed in the frame of the first scan's pose (that robot's own map frame:
-    the first pose becomes ``(0, 0, 0)``); the transform from that frame to the log's frame is
-    returned with the result.
+Reading the log is :mod:`fusionkit.carmen_read` (:func:`read_carmen`, re-exported here, with
+the format's notes). Here: poses re-expressed in the frame of the first scan (that robot's own
+map frame: the first pose becomes ``(0, 0, 0)``), a log cut into overlapping sessions, and the
+files written (each robot's files as one set, a split as one set with ``truth.json`` last).
 """
 
 from __future__ import annotations
@@ -45,20 +11,20 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from types import MappingProxyType
-from typing import Callable, Mapping
+from typing import Callable
 
 import numpy as np
 
-from ._atomic import check_not_input, write_text_atomic
+from ._atomic import check_not_input, check_out_dir, make_out_dir, write_set
+from .carmen_read import (NO_RETURN_BAND, CarmenConfig, CarmenLog, CarmenStats,  # noqa: F401
+                          flaser_geometry, read_carmen)
 from .errors import InputError
 from .grid import OccupancyGrid
 from .mapping import MappingConfig, build_grid
-from .scanlog import ScanLog, save_scans, scans_path_for
-from .transform import Transform2D, wrap_angle
+from .scanlog import ScanLog, encode_scans, scans_path_for
+from .transform import Transform2D
 
 __all__ = [
     "CarmenConfig", "CarmenStats", "CarmenLog", "ImportedMap", "CarmenImport", "read_carmen",
@@ -66,98 +32,9 @@ __all__ = [
     "import_carmen",
 ]
 
-#: Readings this fraction below the no-return value count as no return (scanner error codes).
-NO_RETURN_BAND = 1e-3
-
 ProgressFn = Callable[[int, int, str], None]
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
-
-
-@dataclass(frozen=True)
-class CarmenConfig:
-    """How CARMEN ranges are interpreted.
-
-    Attributes
-    ----------
-    max_range : float or None
-        Usable sensor range (m). When given, readings at or beyond it are no return (FLASER
-        logs are then not searched for a no-return value) and it is the scan log's
-        ``range_max``; ``None`` detects the no-return value from the log.
-    range_cap : float
-        Largest ``range_max`` chosen when ``max_range`` is ``None`` (m).
-    """
-
-    max_range: float | None = None
-    range_cap: float = 40.0
-
-    def __post_init__(self):
-        if self.max_range is not None and not (math.isfinite(self.max_range) and self.max_range > 0):
-            raise InputError(f"max_range must be a positive number of metres, got {self.max_range}")
-        if not (math.isfinite(self.range_cap) and self.range_cap > 0):
-            raise InputError(f"range_cap must be a positive number of metres, got {self.range_cap}")
-
-
-@dataclass(frozen=True)
-class CarmenStats:
-    """What reading a CARMEN log found.
-
-    Attributes
-    ----------
-    records : int
-        Non-blank lines read (every record, whatever its type).
-    scans : int
-        Scans kept.
-    kind : str
-        Record type the kept scans came from (``"FLASER"`` or ``"ROBOTLASER1"``).
-    skipped : Mapping[str, int]
-        Lines not used, by reason: an unknown record type by its name (``"ODOM"``, ``"NEFF"``,
-        ...), ``"comment"``, ``"truncated"`` (fewer fields than the record needs),
-        ``"malformed"`` (a field that is not a number, a negative or NaN range, a non-finite
-        pose) and ``"other_geometry"`` (a beam count or beam angles other than the dominant
-        scans').
-    out_of_order : int
-        Kept scans whose timestamp was earlier than the one before them in the file (they are
-        sorted into time order).
-    no_return_value : float or None
-        The detected (FLASER) or declared (ROBOTLASER1 ``max_range``) no-return reading (m);
-        ``None`` when none was found or ``max_range`` was given for a FLASER log.
-    no_return_readings : int
-        Readings turned into ``inf`` (no return).
-    """
-
-    records: int
-    scans: int
-    kind: str
-    skipped: Mapping[str, int]
-    out_of_order: int
-    no_return_value: float | None
-    no_return_readings: int
-
-    @property
-    def skipped_total(self) -> int:
-        return int(sum(self.skipped.values()))
-
-
-@dataclass(frozen=True, eq=False)
-class CarmenLog:
-    """The scans of a CARMEN log in time order, in the log's own frame.
-
-    Attributes
-    ----------
-    scans : ScanLog
-        Poses in the log's frame (m, rad), ranges (m, ``inf`` = no return).
-    timestamps : (N,) float64
-        Timestamp per scan (s), sorted.
-    stats : CarmenStats
-    source : str
-        The log path as given.
-    """
-
-    scans: ScanLog
-    timestamps: np.ndarray
-    stats: CarmenStats
-    source: str
 
 
 @dataclass(frozen=True)
@@ -218,205 +95,6 @@ class CarmenImport:
     world: ImportedMap | None
     truth: Path | None
     files: tuple[Path, ...] = field(default=())
-
-
-# -- reading ------------------------------------------------------------------------------------
-
-def flaser_geometry(n: int) -> tuple[float, float]:
-    """``(angle_min, angle_increment)`` (rad) of an ``n``-beam FLASER scan covering 180 degrees.
-
-    An even ``n`` steps ``pi / n`` from ``-pi/2`` (the last beam at ``pi/2 - pi/n``: 180
-    beams of 1 degree, as the intel log); an odd ``n`` runs from ``-pi/2`` to ``+pi/2``
-    inclusive in ``pi / (n - 1)`` steps (181 beams of 1 degree, as the orebro log).
-    """
-    if n < 2:
-        raise InputError(f"a FLASER scan needs at least 2 beams, got {n}")
-    inc = math.pi / n if n % 2 == 0 else math.pi / (n - 1)
-    return -math.pi / 2, inc
-
-
-class _Scan:
-    __slots__ = ("key", "ranges", "pose", "stamp", "max_range")
-
-    def __init__(self, key, ranges, pose, stamp, max_range):
-        self.key = key
-        self.ranges = ranges
-        self.pose = pose
-        self.stamp = stamp
-        self.max_range = max_range
-
-
-class _Bad(Exception):
-    def __init__(self, reason: str):
-        self.reason = reason
-
-
-def _floats(tokens) -> list[float]:
-    try:
-        return [float(t) for t in tokens]
-    except ValueError:
-        raise _Bad("malformed") from None
-
-
-def _count(tokens, i: int) -> int:
-    try:
-        n = int(tokens[i])
-    except ValueError:
-        raise _Bad("malformed") from None
-    if n < 0:
-        raise _Bad("malformed")
-    return n
-
-
-def _check(ranges: list[float], pose: list[float]) -> None:
-    if not all(math.isfinite(v) for v in pose):
-        raise _Bad("malformed")
-    if any(not (r >= 0) for r in ranges):  # catches NaN and negatives
-        raise _Bad("malformed")
-
-
-def _parse_flaser(tokens) -> _Scan:
-    if len(tokens) < 2:
-        raise _Bad("truncated")
-    n = _count(tokens, 1)
-    if n < 2:
-        raise _Bad("malformed")
-    need = 2 + n + 6 + 1  # ranges, laser pose, odometry pose, timestamp
-    if len(tokens) < need:
-        raise _Bad("truncated")
-    vals = _floats(tokens[2:need])
-    ranges, pose, stamp = vals[:n], vals[n:n + 3], vals[n + 6]
-    _check(ranges, pose)
-    amin, inc = flaser_geometry(n)
-    return _Scan(("FLASER", n, round(amin, 9), round(inc, 9)), ranges, pose, stamp, None)
-
-
-def _parse_robotlaser(tokens) -> _Scan:
-    if len(tokens) < 10:
-        raise _Bad("truncated")
-    head = _floats(tokens[2:8])  # start_angle fov angular_res max_range accuracy remission_mode
-    start, _fov, res, max_range = head[0], head[1], head[2], head[3]
-    n = _count(tokens, 8)
-    if n < 2 or not (math.isfinite(start) and math.isfinite(res) and res != 0):
-        raise _Bad("malformed")
-    if len(tokens) < 9 + n + 1:
-        raise _Bad("truncated")
-    m = _count(tokens, 9 + n)
-    i = 10 + n + m  # laser pose
-    need = i + 3 + 3 + 5 + 1  # laser pose, robot pose, tv rv fwd side turn, timestamp
-    if len(tokens) < need:
-        raise _Bad("truncated")
-    ranges = _floats(tokens[9:9 + n])
-    _floats(tokens[10 + n:i])
-    rest = _floats(tokens[i:need])
-    pose, stamp = rest[:3], rest[11]
-    _check(ranges, pose)
-    mr = max_range if math.isfinite(max_range) and max_range > 0 else None
-    return _Scan(("ROBOTLASER1", n, round(start, 9), round(res, 9)), ranges, pose, stamp, mr)
-
-
-_PARSERS = {"FLASER": _parse_flaser, "ROBOTLASER1": _parse_robotlaser}
-
-
-def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
-    """Read the FLASER / ROBOTLASER1 scans of a CARMEN log (see the module notes).
-
-    Parameters
-    ----------
-    path : path-like
-        The CARMEN log (plain text).
-    config : CarmenConfig
-        Range interpretation.
-
-    Returns
-    -------
-    CarmenLog
-        Scans in time order in the log's frame, with counts of what was skipped.
-
-    Raises
-    ------
-    InputError
-        The file cannot be read, or holds no usable FLASER or ROBOTLASER1 record.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError(f"{path}: CARMEN log not found")
-    skipped: Counter = Counter()
-    scans: list[_Scan] = []
-    records = 0
-    try:
-        with open(path, "r", encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                tokens = line.split()
-                if not tokens:
-                    continue
-                records += 1
-                kind = tokens[0]
-                if kind.startswith("#"):
-                    skipped["comment"] += 1
-                    continue
-                parser = _PARSERS.get(kind)
-                if parser is None:
-                    skipped[kind[:32]] += 1
-                    continue
-                try:
-                    scans.append(parser(tokens))
-                except _Bad as bad:
-                    skipped[bad.reason] += 1
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read the CARMEN log ({exc.strerror or exc})") from None
-    if not scans:
-        raise InputError(f"{path}: no FLASER or ROBOTLASER1 records in the log "
-                         f"({records} lines read); is this a CARMEN laser log?")
-
-    # Keep the dominant scan geometry (beam count and angles); count the rest.
-    keys = Counter(s.key for s in scans)
-    best = max(keys.values())
-    key = next(s.key for s in scans if keys[s.key] == best)  # first seen among the most common
-    if len(keys) > 1:
-        skipped["other_geometry"] += len(scans) - best
-        scans = [s for s in scans if s.key == key]
-    kind, n, amin, inc = key
-
-    ranges = np.array([s.ranges for s in scans], dtype=np.float64)
-    poses = np.array([s.pose for s in scans], dtype=np.float64)
-    stamps = np.array([s.stamp for s in scans], dtype=np.float64)
-    out_of_order = int((np.diff(stamps) < 0).sum()) if len(stamps) > 1 else 0
-    order = np.argsort(stamps, kind="stable")
-    ranges, poses, stamps = ranges[order], poses[order], stamps[order]
-    poses[:, 2] = wrap_angle(poses[:, 2])
-
-    # No return: the scanner's maximum (the record's max_range for ROBOTLASER1, else the
-    # largest reading when it repeats) and the error codes just below it.
-    sentinel = None
-    if kind == "ROBOTLASER1":
-        mrs = [s.max_range for s in scans if s.max_range is not None]
-        sentinel = Counter(mrs).most_common(1)[0][0] if mrs else None
-    elif config.max_range is None:
-        top = float(ranges.max())
-        below = ranges < top * (1.0 - NO_RETURN_BAND)
-        if int((ranges == top).sum()) >= 2 and below.any():
-            sentinel = top
-    no_return = np.zeros(ranges.shape, bool)
-    if sentinel is not None:
-        no_return |= ranges >= sentinel * (1.0 - NO_RETURN_BAND)
-    if config.max_range is not None:
-        no_return |= ranges >= config.max_range
-    ranges[no_return] = np.inf
-    if config.max_range is not None:
-        range_max = float(config.max_range)
-    else:
-        finite = ranges[np.isfinite(ranges)]
-        largest = float(finite.max()) if finite.size else config.range_cap
-        range_max = min(largest, config.range_cap) if largest > 0 else config.range_cap
-
-    stats = CarmenStats(
-        records=records, scans=len(scans), kind=kind,
-        skipped=MappingProxyType(dict(sorted(skipped.items()))), out_of_order=out_of_order,
-        no_return_value=sentinel, no_return_readings=int(no_return.sum()))
-    log = ScanLog(poses, ranges.astype(np.float32), amin, inc, range_max)
-    stamps.setflags(write=False)
-    return CarmenLog(log, stamps, stats, str(path))
 
 
 # -- frames and sessions --------------------------------------------------------------------------
@@ -492,19 +170,29 @@ def check_outputs(paths, inputs, *, overwrite: bool) -> None:
                              f"directory or allow overwriting (--force)")
 
 
-def write_robot_files(out_dir, name: str, log: ScanLog, grid: OccupancyGrid,
-                      transform: Transform2D) -> ImportedMap:
-    """Write ``NAME.scans.npz``, ``NAME.yaml`` and ``NAME.pgm`` (each atomically)."""
-    from .mapio import save_map
+def _robot_files(out_dir, name: str, log: ScanLog, grid: OccupancyGrid,
+                 transform: Transform2D) -> tuple[ImportedMap, list]:
+    """What :func:`write_robot_files` writes, as ``(result, [(path, bytes), ...])`` with the
+    map's YAML last."""
+    from .mapio import encode_map
 
     yaml_path, pgm_path, npz_path = _outputs_for(Path(out_dir), name)
-    save_scans(npz_path, log)
-    save_map(grid, yaml_path)
+    image, pixels, text = encode_map(grid, yaml_path)
     counts = grid.counts()
-    return ImportedMap(name=name, scans=log.n_scans, transform=transform,
-                       path_length_m=path_length(log.poses), shape=tuple(grid.shape),
-                       occupied=counts["occupied"], free=counts["free"],
-                       files=(npz_path, yaml_path, pgm_path))
+    robot = ImportedMap(name=name, scans=log.n_scans, transform=transform,
+                        path_length_m=path_length(log.poses), shape=tuple(grid.shape),
+                        occupied=counts["occupied"], free=counts["free"],
+                        files=(npz_path, yaml_path, pgm_path))
+    return robot, [(npz_path, encode_scans(log)), (image, pixels), (yaml_path, text)]
+
+
+def write_robot_files(out_dir, name: str, log: ScanLog, grid: OccupancyGrid,
+                      transform: Transform2D) -> ImportedMap:
+    """Write ``NAME.scans.npz``, ``NAME.pgm`` and ``NAME.yaml`` as one set (the YAML is the
+    commit point: on any failure or interrupt the three files are left as they were)."""
+    robot, files = _robot_files(out_dir, name, log, grid, transform)
+    write_set(files[:-1], files[-1])
+    return robot
 
 
 def mapping_config(resolution: float, no_return_free: float) -> MappingConfig:
@@ -577,7 +265,7 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
     if split is not None and split > 1 and name is not None:
         raise InputError("a split writes robot_1 .. robot_K; leave out the map name")
     mcfg = mapping_config(resolution, no_return_free)
-    out_dir = Path(out_dir)
+    out_dir = check_out_dir(out_dir)
     carmen = read_carmen(path, config)
     log = carmen.scans
     split = split or 1
@@ -588,7 +276,7 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
         check_outputs(outputs, [path], overwrite=overwrite)
         own, t = to_own_frame(log)
         grid = build_grid(own, mcfg, name=nm)
-        out_dir.mkdir(parents=True, exist_ok=True)
+        make_out_dir(out_dir)
         robot = write_robot_files(out_dir, nm, own, grid, t)
         if progress:
             progress(1, 1, nm)
@@ -611,11 +299,17 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
         if progress:
             progress(i + 1, total, nm)
 
-    from .mapio import save_map
+    from .mapio import encode_map
 
-    out_dir.mkdir(parents=True, exist_ok=True)
-    robots = tuple(write_robot_files(out_dir, nm, own, g, t) for nm, own, g, t in built)
-    save_map(world_grid, world_yaml)
+    make_out_dir(out_dir)
+    robots, files = [], []
+    for nm, own, g, t in built:
+        robot, payloads = _robot_files(out_dir, nm, own, g, t)
+        robots.append(robot)
+        files += payloads
+    robots = tuple(robots)
+    image, pixels, text = encode_map(world_grid, world_yaml)
+    files += [(image, pixels), (world_yaml, text)]
     wc = world_grid.counts()
     world = ImportedMap("world", log.n_scans, Transform2D.identity(), path_length(log.poses),
                         tuple(world_grid.shape), wc["occupied"], wc["free"],
@@ -630,7 +324,10 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
                     "poses": r.scans, "path_length_m": round(r.path_length_m, 3)}
                    for r in robots],
     }
-    write_text_atomic(truth_path, json.dumps(truth, indent=2) + "\n")
+    # One set: images before the YAMLs naming them (YAMLs taken away first), truth.json last.
+    files.sort(key=lambda f: f[0].suffix == ".yaml")
+    write_set(files, (truth_path, (json.dumps(truth, indent=2) + "\n").encode("utf-8")),
+              hide_first=[p for p, _ in files if p.suffix == ".yaml"])
     if progress:
         progress(total, total, "world")
     files = tuple(p for r in robots for p in r.files) + world.files + (truth_path,)

@@ -28,446 +28,30 @@ RGB, RGBA; 8- or 16-bit).
 
 from __future__ import annotations
 
-import math
 import os
 import re
-import zlib
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ._atomic import atomic_path, check_not_input
-from .errors import InputError, MapFormatError
-from .grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from .mapping import MAX_CELLS
+from ._atomic import _short, check_not_input, show, write_set
+from ._inputs import read_bytes
+from .errors import FusionkitError, InputError, MapFormatError
+from .grid import FREE, OCCUPIED, OccupancyGrid
+from .map_image import MAX_IMAGE_BYTES, _image_header, _pixels_to_cells, _read_pixels
+from .map_yaml import _MAX_YAML_BYTES, _YAML_SUFFIXES, MAP_MODES, _read_yaml, _safe_yaml
 from .scanlog import scans_path_for
 
-__all__ = ["load_map", "save_map", "map_info", "MAP_MODES", "IMAGE_FORMATS"]
+__all__ = ["load_map", "save_map", "save_maps", "encode_map", "map_info", "group_map_files",
+           "MAP_MODES", "IMAGE_FORMATS", "MAX_IMAGE_BYTES"]
 
-#: Interpretations of the pixel values a map YAML may ask for with ``mode``.
-MAP_MODES = ("trinary", "scale", "raw")
 #: Image formats :func:`save_map` writes.
 IMAGE_FORMATS = ("pgm", "png")
-
-_REQUIRED_KEYS = ("image", "resolution", "origin", "negate", "occupied_thresh", "free_thresh")
-_YAML_SUFFIXES = (".yaml", ".yml")
-_MAX_YAML_BYTES = 1 << 20  # a map YAML is a few hundred bytes; anything this big is not one
-_MAX_HEADER_BYTES = 1 << 16  # PNM headers (with comments) longer than this are refused
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-_WHITESPACE = b" \t\r\n\v\f"
 
 # What map_saver writes (ROS 1 map_saver.cpp defaults).
 _SAVE_OCCUPIED_THRESH = 0.65
 _SAVE_FREE_THRESH = 0.196
 _PIXEL_OCCUPIED, _PIXEL_FREE, _PIXEL_UNKNOWN = 0, 254, 205
-
-
-# ---------------------------------------------------------------------------------------------
-# YAML
-# ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class _MapYaml:
-    """The validated contents of a map YAML."""
-
-    yaml_path: Path
-    image: Path
-    resolution: float
-    origin: tuple[float, float, float]
-    negate: bool
-    occupied_thresh: float
-    free_thresh: float
-    mode: str
-
-
-def _read_yaml(yaml_path: Path) -> _MapYaml:
-    import yaml  # PyYAML
-
-    if not yaml_path.exists():
-        raise MapFormatError(f"{yaml_path}: no such map file; check the path")
-    if yaml_path.is_dir():
-        raise MapFormatError(f"{yaml_path}: is a directory, not a map YAML; give the path of the .yaml file")
-    try:
-        with open(yaml_path, "rb") as fh:
-            raw = fh.read(_MAX_YAML_BYTES + 1)
-    except OSError as exc:
-        raise MapFormatError(f"{yaml_path}: cannot be read ({exc.strerror or exc}); check its permissions") from None
-    if raw[:2] in (b"P2", b"P5") or raw.startswith(_PNG_SIGNATURE):
-        raise MapFormatError(
-            f"{yaml_path}: is an image, not a map YAML; give the .yaml file that names this image")
-    if len(raw) > _MAX_YAML_BYTES:
-        raise MapFormatError(
-            f"{yaml_path}: is larger than {_MAX_YAML_BYTES // 1024} KiB, too large to be a map YAML; "
-            f"give the map's .yaml file")
-    try:
-        doc = yaml.safe_load(raw)
-    except yaml.YAMLError as exc:
-        where = ""
-        mark = getattr(exc, "problem_mark", None)
-        if mark is not None:
-            where = f" at line {mark.line + 1}, column {mark.column + 1}"
-        problem = getattr(exc, "problem", None) or "invalid syntax"
-        raise MapFormatError(f"{yaml_path}: is not valid YAML ({problem}{where}); fix the syntax") from None
-    except (UnicodeError, ValueError, RecursionError) as exc:
-        raise MapFormatError(f"{yaml_path}: is not valid YAML ({exc}); fix the file") from None
-    if not isinstance(doc, dict):
-        raise MapFormatError(
-            f"{yaml_path}: does not hold a map_server mapping (image, resolution, origin, negate, "
-            f"occupied_thresh, free_thresh); write it as 'key: value' lines")
-    missing = [k for k in _REQUIRED_KEYS if k not in doc or doc[k] is None]
-    if missing:
-        raise MapFormatError(
-            f"{yaml_path}: the map_server key{'s' if len(missing) > 1 else ''} "
-            f"{', '.join(repr(k) for k in missing)} {'are' if len(missing) > 1 else 'is'} missing; "
-            f"add {'them' if len(missing) > 1 else 'it'} to the YAML")
-
-    image = doc["image"]
-    if not isinstance(image, str) or not image.strip():
-        raise MapFormatError(f"{yaml_path}: 'image' must be the file name of the map image, got {image!r}")
-    image_path = Path(image.strip())
-    if not image_path.is_absolute():
-        image_path = yaml_path.parent / image_path
-
-    resolution = _number(doc["resolution"], "resolution", yaml_path)
-    if resolution <= 0:
-        raise MapFormatError(
-            f"{yaml_path}: 'resolution' must be a positive number of metres per pixel, got {doc['resolution']!r}")
-
-    origin = doc["origin"]
-    if not isinstance(origin, (list, tuple)) or len(origin) != 3:
-        raise MapFormatError(
-            f"{yaml_path}: 'origin' must be a list of 3 numbers [x, y, yaw] (m, m, rad), got {origin!r}")
-    origin = tuple(_number(v, "origin", yaml_path, whole=origin) for v in origin)
-
-    negate = doc["negate"]
-    if isinstance(negate, bool):
-        negate = bool(negate)
-    elif isinstance(negate, int) and negate in (0, 1):
-        negate = bool(negate)
-    else:
-        raise MapFormatError(f"{yaml_path}: 'negate' must be 0 or 1, got {negate!r}")
-
-    occ = _number(doc["occupied_thresh"], "occupied_thresh", yaml_path)
-    free = _number(doc["free_thresh"], "free_thresh", yaml_path)
-    for key, value in (("occupied_thresh", occ), ("free_thresh", free)):
-        if not 0.0 <= value <= 1.0:
-            raise MapFormatError(f"{yaml_path}: '{key}' must lie in [0, 1], got {doc[key]!r}")
-    if free >= occ:
-        raise MapFormatError(
-            f"{yaml_path}: 'free_thresh' ({free:g}) must be smaller than 'occupied_thresh' ({occ:g}); "
-            f"fix the thresholds")
-
-    mode = doc.get("mode")
-    if mode is None:
-        mode = "trinary"
-    elif not isinstance(mode, str) or mode.strip().lower() not in MAP_MODES:
-        raise MapFormatError(
-            f"{yaml_path}: unknown 'mode' {mode!r}; use one of {', '.join(MAP_MODES)} (or leave it out for trinary)")
-    else:
-        mode = mode.strip().lower()
-    return _MapYaml(yaml_path, image_path, resolution, origin, negate, occ, free, mode)
-
-
-def _number(value, key: str, yaml_path: Path, whole=None) -> float:
-    """A finite float from a YAML scalar (numbers, or strings that spell a number)."""
-    shown = whole if whole is not None else value
-    x = None
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        try:
-            x = float(value)
-        except OverflowError:
-            x = None
-    elif isinstance(value, str):
-        try:
-            x = float(value.strip())
-        except ValueError:
-            x = None
-    if x is None or not math.isfinite(x):
-        what = "a list of 3 finite numbers [x, y, yaw]" if key == "origin" else "a finite number"
-        raise MapFormatError(f"{yaml_path}: '{key}' must be {what}, got {shown!r}")
-    return x
-
-
-# ---------------------------------------------------------------------------------------------
-# Images
-# ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class _ImageHeader:
-    kind: str  # "P5", "P2" or "PNG"
-    width: int
-    height: int
-    maxval: int
-    offset: int  # first raster byte (PNM only)
-
-
-def _check_size(path: Path, width: int, height: int) -> None:
-    if width <= 0 or height <= 0:
-        raise MapFormatError(
-            f"{path}: the image header declares a size of {width} x {height} pixels; a map needs at "
-            f"least one pixel, so the file is corrupt: re-export it")
-    if width * height > MAX_CELLS:
-        raise MapFormatError(
-            f"{path}: the image header declares {width} x {height} = {width * height} pixels, more than "
-            f"the {MAX_CELLS} cells fusionkit can hold; the header is corrupt or the map must be "
-            f"cropped or saved at a coarser resolution")
-
-
-def _parse_pnm_header(head: bytes, path: Path, file_size: int) -> _ImageHeader:
-    """Parse ``P5``/``P2`` magic, width, height and maxval (comments allowed between tokens)."""
-    kind = head[:2].decode("ascii")
-    if len(head) >= _MAX_HEADER_BYTES and file_size > len(head):
-        truncated = MapFormatError(
-            f"{path}: the PGM header does not end within its first {_MAX_HEADER_BYTES} bytes; the "
-            f"header is corrupt (or holds overlong comments): re-export the image")
-    else:
-        truncated = MapFormatError(
-            f"{path}: the PGM header is truncated (it must give width, height and maxval); "
-            f"the file is incomplete or not a PGM: re-export it")
-    pos = 2
-    if pos >= len(head) or head[pos] not in _WHITESPACE and head[pos] != ord("#"):
-        raise MapFormatError(f"{path}: the PGM magic number {kind} must be followed by white space; "
-                             f"the header is corrupt: re-export the image")
-    names = ("width", "height", "maxval")
-    values = []
-    for name in names:
-        while True:  # skip white space and comments
-            if pos >= len(head):
-                raise truncated
-            ch = head[pos]
-            if ch in _WHITESPACE:
-                pos += 1
-            elif ch == ord("#"):
-                ends = [i for i in (head.find(b"\n", pos), head.find(b"\r", pos)) if i >= 0]
-                if not ends:
-                    raise truncated
-                pos = min(ends) + 1
-            else:
-                break
-        start = pos
-        while pos < len(head) and 48 <= head[pos] <= 57:
-            pos += 1
-        if pos == start:
-            raise MapFormatError(
-                f"{path}: the PGM header is corrupt: expected the {name} as a decimal number at byte "
-                f"{start}, found {head[start:start + 12]!r}; re-export the image")
-        if pos - start > 30:
-            raise MapFormatError(
-                f"{path}: the PGM header is corrupt: the {name} has {pos - start} digits; re-export the image")
-        if pos >= len(head):
-            raise truncated
-        if head[pos] not in _WHITESPACE and head[pos] != ord("#"):
-            raise MapFormatError(
-                f"{path}: the PGM header is corrupt: the {name} is followed by {bytes([head[pos]])!r} "
-                f"instead of white space; re-export the image")
-        values.append(int(head[start:pos]))
-    width, height, maxval = values
-    # Exactly one white-space character (or a comment up to its line end) ends the header.
-    if head[pos] == ord("#"):
-        ends = [i for i in (head.find(b"\n", pos), head.find(b"\r", pos)) if i >= 0]
-        if not ends:
-            raise truncated
-        pos = min(ends) + 1
-    else:
-        pos += 1
-    if not 1 <= maxval <= 65535:
-        raise MapFormatError(
-            f"{path}: the PGM maxval is {maxval}, but it must be between 1 and 65535; the header is "
-            f"corrupt: re-export the image")
-    _check_size(path, width, height)
-    return _ImageHeader(kind, width, height, maxval, pos)
-
-
-def _png_header(head: bytes, path: Path) -> _ImageHeader:
-    # Signature (8) + IHDR chunk: length (4), type (4), width (4), height (4), ...
-    if len(head) < 24 or head[12:16] != b"IHDR":
-        raise MapFormatError(f"{path}: the PNG file is truncated or corrupt (no IHDR header); re-export it")
-    width = int.from_bytes(head[16:20], "big")
-    height = int.from_bytes(head[20:24], "big")
-    _check_size(path, width, height)
-    return _ImageHeader("PNG", width, height, 0, 0)
-
-
-def _image_header(path: Path) -> tuple[_ImageHeader, int]:
-    """Identify the image and parse its header; returns the header and the file size (bytes)."""
-    try:
-        with open(path, "rb") as fh:
-            size = os.fstat(fh.fileno()).st_size
-            head = fh.read(_MAX_HEADER_BYTES)
-    except IsADirectoryError:
-        raise MapFormatError(f"{path}: is a directory, not a map image; fix the 'image' key of the YAML") from None
-    except OSError as exc:
-        raise MapFormatError(f"{path}: the map image cannot be read ({exc.strerror or exc}); check its permissions") from None
-    if head[:2] in (b"P5", b"P2"):
-        return _parse_pnm_header(head, path, size), size
-    if head.startswith(_PNG_SIGNATURE):
-        return _png_header(head, path), size
-    if head[:2] in (b"P1", b"P3", b"P4", b"P6", b"P7"):
-        kind = {b"P1": "PBM", b"P4": "PBM", b"P3": "PPM", b"P6": "PPM", b"P7": "PAM"}[head[:2]]
-    elif not head:
-        raise MapFormatError(f"{path}: the map image is empty; re-export it as PGM or PNG")
-    else:
-        kind = "unrecognised"
-    raise MapFormatError(
-        f"{path}: {kind} image files are not supported as map images; convert it to PGM (P5/P2) or PNG")
-
-
-def _read_pixels(path: Path) -> tuple[np.ndarray, int]:
-    """Pixels ``(height, width[, channels])`` in file order (top row first) and their maxval."""
-    header, size = _image_header(path)
-    w, h = header.width, header.height
-    if header.kind == "P5":
-        bps = 1 if header.maxval < 256 else 2
-        need = w * h * bps
-        have = max(size - header.offset, 0)
-        if have < need:
-            raise MapFormatError(
-                f"{path}: the PGM is truncated: its header declares {w} x {h} pixels ({need} bytes) but "
-                f"only {have} bytes follow; the file is incomplete: re-export it")
-        try:
-            with open(path, "rb") as fh:
-                fh.seek(header.offset)
-                raw = fh.read(need)
-        except OSError as exc:
-            raise MapFormatError(f"{path}: the map image cannot be read ({exc.strerror or exc})") from None
-        if len(raw) < need:
-            raise MapFormatError(f"{path}: the PGM is truncated (the file shrank while being read); re-export it")
-        pixels = np.frombuffer(raw, dtype=np.uint8 if bps == 1 else ">u2").reshape(h, w)
-        if bps == 2:
-            pixels = pixels.astype(np.uint16)
-    elif header.kind == "P2":
-        pixels = _read_plain_pgm(path, header)
-    else:
-        pixels = _read_png(path, header)
-        return pixels, 255 if pixels.dtype == np.uint8 else 65535
-    if header.maxval not in (255, 65535):
-        top = int(pixels.max())
-        if top > header.maxval:
-            raise MapFormatError(
-                f"{path}: a pixel value {top} exceeds the PGM maxval {header.maxval}; the file is "
-                f"corrupt: re-export it")
-    return pixels, header.maxval
-
-
-def _read_plain_pgm(path: Path, header: _ImageHeader) -> np.ndarray:
-    w, h = header.width, header.height
-    try:
-        with open(path, "rb") as fh:
-            fh.seek(header.offset)
-            text = fh.read()
-    except OSError as exc:
-        raise MapFormatError(f"{path}: the map image cannot be read ({exc.strerror or exc})") from None
-    tokens = re.sub(rb"#[^\r\n]*", b" ", text).split()
-    if len(tokens) < w * h:
-        raise MapFormatError(
-            f"{path}: the plain PGM is truncated: its header declares {w} x {h} = {w * h} pixels but only "
-            f"{len(tokens)} values follow; the file is incomplete: re-export it")
-    del text
-    try:
-        values = np.array(tokens[: w * h], dtype=np.bytes_).astype(np.int64)
-    except (ValueError, OverflowError):
-        raise MapFormatError(
-            f"{path}: the plain PGM holds a pixel value that is not a whole number; the file is "
-            f"corrupt: re-export it") from None
-    if values.size and (values.min() < 0 or values.max() > header.maxval):
-        raise MapFormatError(
-            f"{path}: the plain PGM holds pixel values outside 0..{header.maxval} (its maxval); the file "
-            f"is corrupt: re-export it")
-    return values.astype(np.uint8 if header.maxval < 256 else np.uint16).reshape(h, w)
-
-
-def _check_png_chunks(data: bytes, path: Path) -> None:
-    """Walk the PNG chunks (length, type, CRC) up to IEND, so that a truncated or damaged file
-    is reported here rather than half-decoded."""
-    pos = len(_PNG_SIGNATURE)
-    while True:
-        if pos + 12 > len(data):
-            raise MapFormatError(f"{path}: the PNG is truncated (it ends before its IEND chunk); re-export it")
-        length = int.from_bytes(data[pos:pos + 4], "big")
-        end = pos + 12 + length
-        if end > len(data):
-            raise MapFormatError(f"{path}: the PNG is truncated (a chunk runs past the end of the file); re-export it")
-        kind = data[pos + 4:pos + 8]
-        if zlib.crc32(data[pos + 4:end - 4]) != int.from_bytes(data[end - 4:end], "big"):
-            raise MapFormatError(
-                f"{path}: the PNG is corrupt (checksum mismatch in its {kind!r} chunk); re-export it")
-        if kind == b"IEND":
-            return
-        pos = end
-
-
-def _read_png(path: Path, header: _ImageHeader) -> np.ndarray:
-    import cv2
-
-    try:
-        buf = np.fromfile(path, dtype=np.uint8)
-    except OSError as exc:
-        raise MapFormatError(f"{path}: the map image cannot be read ({exc.strerror or exc})") from None
-    _check_png_chunks(buf.tobytes(), path)
-    try:
-        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
-    except cv2.error:
-        img = None
-    if img is None:
-        raise MapFormatError(f"{path}: the PNG cannot be decoded (truncated or corrupt); re-export it")
-    if img.dtype not in (np.uint8, np.uint16):
-        raise MapFormatError(f"{path}: PNG pixels of type {img.dtype} are not supported; save it as 8- or 16-bit")
-    if img.shape[:2] != (header.height, header.width) or img.ndim not in (2, 3) or (
-            img.ndim == 3 and img.shape[2] not in (1, 2, 3, 4)):
-        raise MapFormatError(f"{path}: the PNG decodes to an unexpected shape {img.shape}; re-export it")
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[:, :, 0]
-    return img
-
-
-# ---------------------------------------------------------------------------------------------
-# Pixels -> cells (map_server / nav2_map_server semantics)
-# ---------------------------------------------------------------------------------------------
-def _pixels_to_cells(pixels: np.ndarray, maxval: int, meta: _MapYaml) -> np.ndarray:
-    """Occupancy values int8 ``(height, width)`` in image order (top row first).
-
-    Every result depends on the pixel only through an integer channel sum, so the rule is
-    evaluated once per possible sum (a lookup table) and then indexed by the image.
-    """
-    m = float(maxval)
-    alpha = None
-    if pixels.ndim == 2:
-        colour_sum, n_colour = pixels, 1
-    else:
-        c = pixels.shape[2]
-        if c == 2:  # grey + alpha: the colour channels are R = G = B = grey
-            colour_sum, n_colour = pixels[:, :, 0].astype(np.uint32) * 3, 3
-            alpha = pixels[:, :, 1]
-        else:
-            colour_sum = pixels[:, :, :3].sum(axis=2, dtype=np.uint32)
-            n_colour = 3
-            alpha = pixels[:, :, 3] if c == 4 else None
-
-    if meta.mode == "trinary" and alpha is not None:
-        # map_server averages the alpha (opacity) channel in with the colours in trinary mode.
-        index = colour_sum + alpha.astype(np.uint32)
-        n = n_colour + 1
-    else:
-        index, n = colour_sum, n_colour
-
-    sums = np.arange(n * maxval + 1, dtype=np.float64)
-    avg = sums / n  # color_avg = color_sum / n_channels
-    if meta.mode == "raw":
-        # nav2: occ_percent = round(shade * 255), kept when in [0, 100]; negate does not apply.
-        value = np.floor(avg / m * 255.0 + 0.5)
-        lut = np.where((value >= 0) & (value <= 100), value, UNKNOWN)
-    else:
-        if meta.negate:
-            avg = m - avg  # color_avg = 255 - color_avg
-        p = (m - avg) / m  # occ = (255 - color_avg) / 255
-        lut = np.full(sums.shape, UNKNOWN, np.float64)
-        if meta.mode == "scale":
-            # nav2: intermediate shades become rint(100 * (occ - free) / (occ_th - free)).
-            lut = np.rint((p - meta.free_thresh) / (meta.occupied_thresh - meta.free_thresh) * 100.0)
-        lut = np.where(p > meta.occupied_thresh, OCCUPIED, np.where(p < meta.free_thresh, FREE, lut))
-    cells = lut.astype(np.int8)[index]
-    if meta.mode == "scale" and alpha is not None:
-        cells[alpha != maxval] = UNKNOWN  # nav2: any pixel that is not fully opaque is unknown
-    return cells
 
 
 # ---------------------------------------------------------------------------------------------
@@ -507,7 +91,7 @@ def load_map(yaml_path) -> OccupancyGrid:
     """
     yaml_path = Path(yaml_path)
     meta = _read_yaml(yaml_path)
-    if not meta.image.exists():
+    if not os.path.lexists(meta.image):
         raise MapFormatError(
             f"{yaml_path}: the image {meta.image} it names does not exist; fix the 'image' key or "
             f"restore the file")
@@ -541,7 +125,7 @@ def map_info(yaml_path) -> dict:
     """
     yaml_path = Path(yaml_path)
     meta = _read_yaml(yaml_path)
-    if not meta.image.exists():
+    if not os.path.lexists(meta.image):
         raise MapFormatError(
             f"{yaml_path}: the image {meta.image} it names does not exist; fix the 'image' key or "
             f"restore the file")
@@ -563,6 +147,56 @@ def map_info(yaml_path) -> dict:
         "free_thresh": meta.free_thresh,
         "has_scans": scans_path_for(yaml_path).is_file(),
     }
+
+
+def encode_map(grid: OccupancyGrid, yaml_path, *, image_format: str = "pgm") -> tuple[Path, bytes, bytes]:
+    """The two files of a saved map, as bytes: ``(image_path, image_bytes, yaml_bytes)``.
+
+    What :func:`save_map` writes (see there), without writing it; for callers that write a map
+    as part of a larger set of files with :func:`save_maps`.
+    """
+    import cv2
+    import yaml
+
+    fmt = str(image_format).lower().lstrip(".")
+    if fmt not in IMAGE_FORMATS:
+        raise InputError(f"image format {show(image_format)} is not supported; use one of {', '.join(IMAGE_FORMATS)}")
+    yaml_path = Path(yaml_path)
+    if yaml_path.suffix.lower() not in _YAML_SUFFIXES:
+        raise InputError(f"{_short(yaml_path)}: a map must be saved to a .yaml (or .yml) file; change the output name")
+    if not isinstance(grid, OccupancyGrid):
+        raise InputError(f"{_short(yaml_path)}: save_map needs an OccupancyGrid, got {type(grid).__name__}")
+    if grid.data.size == 0:
+        raise InputError(f"{_short(yaml_path)}: the grid has no cells ({grid.rows} x {grid.cols}); there is nothing to save")
+    image_path = yaml_path.with_name(yaml_path.stem + "." + fmt)
+
+    states = grid.trinary()
+    pixels = np.full(states.shape, _PIXEL_UNKNOWN, np.uint8)
+    pixels[states == FREE] = _PIXEL_FREE
+    pixels[states == OCCUPIED] = _PIXEL_OCCUPIED
+    pixels = np.ascontiguousarray(pixels[::-1])  # grid row 0 (lowest y) is the image's bottom row
+    if fmt == "pgm":
+        head = f"P5\n# CREATOR: fusionkit {grid.resolution:.3f} m/pix\n{grid.cols} {grid.rows}\n255\n"
+        payload = head.encode("ascii") + pixels.tobytes()
+    else:
+        ok, buf = cv2.imencode(".png", pixels)
+        if not ok:
+            raise InputError(f"{_short(image_path)}: the PNG encoder failed; save as pgm instead")
+        payload = buf.tobytes()
+
+    text = yaml.safe_dump(
+        {
+            "image": image_path.name,
+            "mode": "trinary",
+            "resolution": float(grid.resolution),
+            "origin": [float(v) for v in grid.origin],
+            "negate": 0,
+            "occupied_thresh": _SAVE_OCCUPIED_THRESH,
+            "free_thresh": _SAVE_FREE_THRESH,
+        },
+        sort_keys=False, default_flow_style=None, allow_unicode=True,
+    )
+    return image_path, payload, text.encode("utf-8")
 
 
 def save_map(grid: OccupancyGrid, yaml_path, *, image_format: str = "pgm", inputs=()) -> None:
@@ -592,59 +226,77 @@ def save_map(grid: OccupancyGrid, yaml_path, *, image_format: str = "pgm", input
     ------
     InputError
         Unknown ``image_format``, a YAML path without a .yaml/.yml suffix, an empty grid, an
-        output that would overwrite one of ``inputs``, or a missing output directory.
+        output that would overwrite one of ``inputs``, a missing or read-only output folder.
 
     Notes
     -----
-    Both files are written atomically (temporary file, then rename); on any failure neither
-    target is changed and no temporary file is left behind.
+    The pair is written as one set (:func:`save_maps`): the old YAML is taken away before the
+    new image is renamed into place and the new YAML comes last, so a YAML never names an
+    image of another write; on any failure or interrupt both files are left as they were.
     """
-    import cv2
-    import yaml
+    save_maps([(grid, yaml_path)], image_format=image_format, inputs=inputs)
 
-    fmt = str(image_format).lower().lstrip(".")
-    if fmt not in IMAGE_FORMATS:
-        raise InputError(f"image format {image_format!r} is not supported; use one of {', '.join(IMAGE_FORMATS)}")
-    yaml_path = Path(yaml_path)
-    if yaml_path.suffix.lower() not in _YAML_SUFFIXES:
-        raise InputError(f"{yaml_path}: a map must be saved to a .yaml (or .yml) file; change the output name")
-    if not isinstance(grid, OccupancyGrid):
-        raise InputError(f"{yaml_path}: save_map needs an OccupancyGrid, got {type(grid).__name__}")
-    if grid.data.size == 0:
-        raise InputError(f"{yaml_path}: the grid has no cells ({grid.rows} x {grid.cols}); there is nothing to save")
-    image_path = yaml_path.with_name(yaml_path.stem + "." + fmt)
-    check_not_input([yaml_path, image_path], _protected(inputs))
 
-    states = grid.trinary()
-    pixels = np.full(states.shape, _PIXEL_UNKNOWN, np.uint8)
-    pixels[states == FREE] = _PIXEL_FREE
-    pixels[states == OCCUPIED] = _PIXEL_OCCUPIED
-    pixels = np.ascontiguousarray(pixels[::-1])  # grid row 0 (lowest y) is the image's bottom row
-    if fmt == "pgm":
-        head = f"P5\n# CREATOR: fusionkit {grid.resolution:.3f} m/pix\n{grid.cols} {grid.rows}\n255\n"
-        payload = head.encode("ascii") + pixels.tobytes()
+def save_maps(maps, report=None, *, image_format: str = "pgm", inputs=(), remove=()) -> None:
+    """Write several maps and a report as one set of files (a merged map and its group maps).
+
+    Parameters
+    ----------
+    maps : sequence of (OccupancyGrid, yaml path)
+        The maps of the set; each is written as :func:`save_map` writes it.
+    report : (path, bytes or str), optional
+        A report written last, as the set's commit point: while it is absent the set is being
+        written (or a write was killed); once present every file of the set is of one write.
+        Without it, the first map's YAML is the commit point.
+    image_format : {"pgm", "png"}, keyword-only
+    inputs : iterable of paths, keyword-only
+        Files that must not be overwritten or removed (and, for a map YAML, the image it names).
+    remove : iterable of paths, keyword-only
+        Files of an earlier write of this set that the new set does not have (for example a
+        group map the new merge no longer finds); removed as part of the same commit.
+
+    Raises
+    ------
+    InputError
+        As :func:`save_map`; also two outputs of the set that are the same file.
+
+    Notes
+    -----
+    Crash safety (:func:`fusionkit._atomic.write_set`): a reader never finds files of two
+    writes together with the commit file; after a crash the next write to the same output
+    finishes or undoes the interrupted one; two writers to one output end with one whole set.
+    """
+    maps = [(g, Path(y)) for g, y in maps]
+    if not maps:
+        raise InputError("save_maps needs at least one map to write")
+    encoded = [encode_map(g, y, image_format=image_format) for g, y in maps]
+    files = [(img, payload) for img, payload, _ in encoded]
+    yamls = [(y, text) for (_, y), (_, _, text) in zip(maps, encoded)]
+    if report is not None:
+        rpath, rbytes = Path(report[0]), report[1]
+        commit = (rpath, rbytes.encode("utf-8") if isinstance(rbytes, str) else bytes(rbytes))
+        files += yamls
     else:
-        ok, buf = cv2.imencode(".png", pixels)
-        if not ok:
-            raise InputError(f"{image_path}: the PNG encoder failed; save as pgm instead")
-        payload = buf.tobytes()
+        commit = yamls[0]
+        files += yamls[1:]
+    remove = [Path(p) for p in remove if p is not None and os.path.lexists(p)]
+    protected = _protected(inputs)
+    check_not_input([y for y, _ in yamls] + [p for p, _ in files] + [commit[0]] + remove, protected)
+    files += [(p, None) for p in remove]
+    write_set(files, commit, hide_first=[y for y, _ in yamls])
 
-    text = yaml.safe_dump(
-        {
-            "image": image_path.name,
-            "mode": "trinary",
-            "resolution": float(grid.resolution),
-            "origin": [float(v) for v in grid.origin],
-            "negate": 0,
-            "occupied_thresh": _SAVE_OCCUPIED_THRESH,
-            "free_thresh": _SAVE_FREE_THRESH,
-        },
-        sort_keys=False, default_flow_style=None, allow_unicode=True,
-    )
-    # The image is renamed into place first, then the YAML that names it.
-    with atomic_path(yaml_path) as tmp_yaml, atomic_path(image_path) as tmp_image:
-        tmp_image.write_bytes(payload)
-        tmp_yaml.write_text(text, encoding="utf-8")
+
+def group_map_files(yaml_path) -> list[Path]:
+    """The group maps of a merge written beside ``yaml_path`` (``NAME.groupK.yaml`` and its
+    ``.pgm``/``.png``), found by name only (never by what a file says)."""
+    yaml_path = Path(yaml_path)
+    parent = yaml_path.parent if str(yaml_path.parent) else Path(".")
+    pattern = re.compile(re.escape(yaml_path.stem) + r"\.group[1-9][0-9]{0,3}\.(yaml|yml|pgm|png)")
+    try:
+        names = os.listdir(parent)
+    except OSError:
+        return []
+    return sorted(parent / n for n in names if pattern.fullmatch(n) and (parent / n).is_file())
 
 
 def _protected(inputs) -> list[Path]:
@@ -657,14 +309,13 @@ def _protected(inputs) -> list[Path]:
             continue
         p = Path(p)
         out.append(p)
-        if p.suffix.lower() in _YAML_SUFFIXES and p.is_file():
+        if p.suffix.lower() in _YAML_SUFFIXES:
             try:
-                with open(p, "rb") as fh:
-                    doc = yaml.safe_load(fh.read(_MAX_YAML_BYTES))
+                doc = _safe_yaml(read_bytes(p, "map YAML", _MAX_YAML_BYTES))
                 image = doc.get("image") if isinstance(doc, dict) else None
-            except (OSError, yaml.YAMLError, UnicodeError, ValueError):
+            except (FusionkitError, yaml.YAMLError, UnicodeError, ValueError, RecursionError):
                 image = None
-            if isinstance(image, str) and image.strip():
+            if isinstance(image, str) and image.strip() and "\x00" not in image:
                 ip = Path(image.strip())
                 out.append(ip if ip.is_absolute() else p.parent / ip)
     return out

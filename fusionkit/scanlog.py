@@ -11,17 +11,26 @@ from __future__ import annotations
 import io
 import math
 import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ._atomic import write_bytes_atomic
+from ._atomic import _short, show, write_bytes_atomic
+from ._inputs import regular_file
 from .errors import ScanLogError
 
-__all__ = ["ScanLog", "load_scans", "save_scans", "scans_path_for"]
+__all__ = ["ScanLog", "load_scans", "save_scans", "encode_scans", "scans_path_for"]
 
 _KEYS = ("poses", "ranges", "angle_min", "angle_increment", "range_max")
+#: Largest sensor range accepted (m); larger is a corrupt log, not a LIDAR.
+MAX_RANGE = 1e5
+#: Poses farther than this from the origin (m) are a corrupt log.
+MAX_COORDINATE = 1e9
+#: Most bytes the arrays of one scan log may take once loaded (a zip bomb is refused unread).
+MAX_SCAN_BYTES = 2_000_000_000
+_ZIP_SIGNATURES = (b"PK\x03\x04", b"PK\x05\x06")
 
 
 @dataclass(frozen=True, eq=False)
@@ -47,8 +56,15 @@ class ScanLog:
     range_max: float
 
     def __post_init__(self):
-        poses = np.ascontiguousarray(self.poses, dtype=np.float64)
-        ranges = np.ascontiguousarray(self.ranges, dtype=np.float32)
+        for name in ("poses", "ranges"):
+            kind = np.asarray(getattr(self, name)).dtype.kind
+            if kind not in "fiu":
+                what = {"c": "complex numbers", "U": "text", "S": "text", "O": "Python objects",
+                        "b": "true/false values"}.get(kind, f"values of type {np.asarray(getattr(self, name)).dtype}")
+                raise ScanLogError(f"{name} must hold real numbers (metres, radians), not {what}")
+        with np.errstate(over="ignore"):  # ranges beyond float32 are no return (inf) anyway
+            poses = np.ascontiguousarray(self.poses, dtype=np.float64)
+            ranges = np.ascontiguousarray(self.ranges, dtype=np.float32)
         if poses.ndim != 2 or poses.shape[1] != 3:
             raise ScanLogError(f"poses must have shape (N, 3) as x, y, theta; got {poses.shape}")
         if ranges.ndim != 2:
@@ -67,14 +83,20 @@ class ScanLog:
         if (ranges < 0).any():
             raise ScanLogError("ranges contain negative values; ranges are distances in metres (>= 0)")
         for name in ("angle_min", "angle_increment", "range_max"):
-            v = float(np.asarray(getattr(self, name)).reshape(()))
+            a = np.asarray(getattr(self, name))
+            if a.dtype.kind not in "fiu" or a.size != 1:
+                raise ScanLogError(f"{name} must be a single real number")
+            v = float(a.reshape(()))
             if not math.isfinite(v):
-                raise ScanLogError(f"{name} must be a finite number, got {v}")
+                raise ScanLogError(f"{name} must be a finite number, got {v:.6g}")
             object.__setattr__(self, name, v)
         if self.angle_increment == 0:
             raise ScanLogError("angle_increment must not be 0")
-        if self.range_max <= 0:
-            raise ScanLogError(f"range_max must be > 0 m, got {self.range_max}")
+        if not 0 < self.range_max <= MAX_RANGE:
+            raise ScanLogError(f"range_max must be > 0 m and at most {MAX_RANGE:g} m, got {self.range_max:.6g}")
+        if np.abs(poses[:, :2]).max(initial=0.0) > MAX_COORDINATE:
+            raise ScanLogError(f"poses lie more than {MAX_COORDINATE:g} m from the origin; the log "
+                               f"is corrupt or not in metres")
         poses.setflags(write=False)
         ranges.setflags(write=False)
         object.__setattr__(self, "poses", poses)
@@ -130,35 +152,85 @@ def scans_path_for(map_yaml) -> Path:
     return p.with_name(p.stem + ".scans.npz")
 
 
-def save_scans(path, log: ScanLog) -> None:
-    """Write ``log`` to ``path`` (``.scans.npz``) atomically, in the CONTRACTS section 3 layout."""
+def encode_scans(log: ScanLog) -> bytes:
+    """The bytes of ``log`` as a ``.scans.npz`` (CONTRACTS section 3), for writing in a set."""
     buf = io.BytesIO()
     np.savez_compressed(
         buf, poses=log.poses, ranges=log.ranges, angle_min=np.float64(log.angle_min),
         angle_increment=np.float64(log.angle_increment), range_max=np.float64(log.range_max))
-    write_bytes_atomic(path, buf.getvalue())
+    return buf.getvalue()
+
+
+def save_scans(path, log: ScanLog) -> None:
+    """Write ``log`` to ``path`` (``.scans.npz``) atomically, in the CONTRACTS section 3 layout."""
+    write_bytes_atomic(path, encode_scans(log))
 
 
 def load_scans(path) -> ScanLog:
-    """Read a ``.scans.npz``; raise :class:`ScanLogError` naming the file on any problem."""
-    path = Path(path)
-    if not path.is_file():
-        raise ScanLogError(f"{path}: scan log not found")
+    """Read a ``.scans.npz``; raise :class:`ScanLogError` naming the file on any problem.
+
+    The file must be a regular file holding an npz archive (never pickled data) whose arrays
+    together take at most :data:`MAX_SCAN_BYTES` once loaded; each array's header is checked
+    against its stored size before anything is decompressed.
+    """
+    path = regular_file(path, "scan log", ScanLogError)
+    name = _short(path)
     try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in _KEYS if k not in z.files]
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise ScanLogError(f"{name}: the scan log cannot be read ({exc.strerror or exc})") from None
+    if magic not in _ZIP_SIGNATURES:
+        raise ScanLogError(f"{name}: is not an .npz scan log (an npz is a zip archive of arrays, "
+                           f"this file is not one); write it with numpy.savez or fusionkit")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            members = {i.filename: i for i in zf.infolist()}
+            missing = [k for k in _KEYS if k + ".npy" not in members]
             if missing:
-                raise ScanLogError(f"{path}: missing key(s) {', '.join(missing)}; a scan log needs "
+                raise ScanLogError(f"{name}: missing key(s) {', '.join(missing)}; a scan log needs "
                                    f"{', '.join(_KEYS)}")
-            arrays = {k: z[k] for k in _KEYS}
+            total = sum(members[k + ".npy"].file_size for k in _KEYS)
+            if total > MAX_SCAN_BYTES:
+                raise ScanLogError(
+                    f"{name}: its arrays take {total / 1e9:.1f} GB once loaded, more than the "
+                    f"{MAX_SCAN_BYTES / 1e9:.0f} GB fusionkit reads from one scan log; record "
+                    f"fewer scans per log")
+            arrays = {k: _read_member(zf, members[k + ".npy"], k, name) for k in _KEYS}
     except ScanLogError:
         raise
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise ScanLogError(f"{path}: not a readable .npz scan log ({exc})") from None
-    for k in ("angle_min", "angle_increment", "range_max"):
-        if np.asarray(arrays[k]).size != 1:
-            raise ScanLogError(f"{path}: {k} must be a single number")
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError, NotImplementedError,
+            RuntimeError, zlib.error) as exc:
+        raise ScanLogError(f"{name}: not a readable .npz scan log ({show(str(exc), 100)}); "
+                           f"it may be truncated: write it again") from None
     try:
         return ScanLog(**arrays)
     except ScanLogError as exc:
-        raise ScanLogError(f"{path}: {exc}") from None
+        raise ScanLogError(f"{name}: {exc}") from None
+
+
+def _read_member(zf: zipfile.ZipFile, info: zipfile.ZipInfo, key: str, name: str) -> np.ndarray:
+    """One array of the archive, its header checked before the data is read."""
+    fmt = np.lib.format
+    with zf.open(info) as fh:
+        version = fmt.read_magic(fh)
+        if version == (1, 0):
+            shape, fortran, dtype = fmt.read_array_header_1_0(fh, max_header_size=10000)
+        elif version in ((2, 0), (3, 0)):
+            shape, fortran, dtype = fmt.read_array_header_2_0(fh, max_header_size=10000)
+        else:
+            raise ScanLogError(f"{name}: {key} is stored in an unknown .npy version {version}")
+        if dtype.hasobject:
+            raise ScanLogError(f"{name}: {key} holds Python objects (pickled data), which fusionkit "
+                               f"never loads; store it as an array of numbers")
+        count = 1
+        for n in shape:
+            count *= int(n)
+        if count * dtype.itemsize > info.file_size:
+            raise ScanLogError(
+                f"{name}: the header of {key} declares {count * dtype.itemsize / 1e9:.3g} GB of "
+                f"data but the archive holds {info.file_size} bytes; the file is corrupt: write it again")
+        data = fh.read(count * dtype.itemsize)
+    if len(data) != count * dtype.itemsize:
+        raise ScanLogError(f"{name}: {key} is truncated; the file is incomplete: write it again")
+    return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")

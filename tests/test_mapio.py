@@ -4,6 +4,7 @@ every bad input, and property tests for the loaders."""
 from __future__ import annotations
 
 import math
+import os
 import re
 import struct
 import tempfile
@@ -254,11 +255,16 @@ def test_failed_save_leaves_targets_and_no_temp_files(tmp_path, monkeypatch):
     save_map(_grid(), out)
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
 
-    def broken(self, *args, **kwargs):
-        raise OSError(28, "No space left on device")
+    real_replace, calls = os.replace, []
 
-    monkeypatch.setattr(Path, "write_text", broken)
-    with pytest.raises(OSError):
+    def disk_full_on_the_yaml(src, dst):  # the image is already in place when the YAML fails
+        if str(dst).endswith("m.yaml") and not calls:
+            calls.append(dst)
+            raise OSError(28, "No space left on device", str(src))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", disk_full_on_the_yaml)
+    with pytest.raises(InputError, match=r"m.yaml: cannot be written \(No space left on device\)"):
         save_map(_grid(3), out)
     monkeypatch.undo()
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before

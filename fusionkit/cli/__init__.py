@@ -1,8 +1,9 @@
 """The ``fusionkit`` command line.
 
 Each subcommand lives in its own module of this package with a ``register(subparsers)``
-function; errors the user can fix (:class:`fusionkit.errors.FusionkitError`) print one line on
-stderr and exit with status 2.
+function; errors the user can fix (:class:`fusionkit.errors.FusionkitError`, and any OS error
+such as a read-only folder) print one line on stderr and exit with status 2; SIGINT exits 130
+and SIGTERM 143, each with one line.
 
 Only the module of the command being run is imported (the others load numba, SciPy or
 Textual, which takes a second): ``fusionkit --help`` lists the commands from :data:`COMMANDS`.
@@ -14,6 +15,7 @@ import argparse
 import importlib
 import sys
 
+from .. import _signals
 from ..errors import FusionkitError
 
 __all__ = ["main", "build_parser", "COMMANDS"]
@@ -70,15 +72,76 @@ def build_parser(argv=None) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    """Run one command; return its exit status.
+
+    0 done (3: some maps left out of a merge), 2 bad input (one line on stderr, no
+    traceback), 130 interrupted by SIGINT (Ctrl-C), 143 stopped by SIGTERM. An interrupted
+    command leaves its outputs as they were before it started.
+    """
+    command = "fusionkit"
     try:
-        code = args.func(args)
+        _signals.install()
+        argv = sys.argv[1:] if argv is None else list(argv)
+        parser = build_parser(argv)
+        args = parser.parse_args(argv)
+        command = f"fusionkit {args.command}"
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM as _signals.Terminated
+        _quiet_signals()
+        term = isinstance(exc, _signals.Terminated)
+        _say(f"{command}: {'terminated' if term else 'interrupted'}; no output was left "
+             f"half-written")
+        return _signals.EXIT_SIGTERM if term else _signals.EXIT_SIGINT
     except FusionkitError as exc:
-        print(f"fusionkit {args.command}: error: {exc}", file=sys.stderr)
+        _say(f"{command}: error: {_one_line(exc)}")
         return 2
-    except KeyboardInterrupt:
-        print(f"fusionkit {args.command}: interrupted", file=sys.stderr)
-        return 130
-    return int(code or 0)
+    except BrokenPipeError:  # the reader of our output went away (e.g. `| head`)
+        _quiet_stdout()
+        return 0
+    except OSError as exc:
+        from .._atomic import show
+
+        where = f"{show(str(exc.filename), 200)}: " if exc.filename else ""
+        _say(f"{command}: error: {where}{exc.strerror or exc.__class__.__name__}; check the path, "
+             f"its permissions and the free disk space")
+        return 2
+    except MemoryError:
+        _say(f"{command}: error: out of memory; give smaller inputs")
+        return 2
+    except RecursionError:
+        _say(f"{command}: error: an input is nested too deeply to read; check the files given")
+        return 2
+
+
+def _one_line(exc) -> str:
+    text = str(exc).replace("\x00", "\\x00")
+    text = " ".join(text.split("\n"))
+    return text if len(text) <= 2000 else text[:1000] + " ... " + text[-500:]
+
+
+def _say(line: str) -> None:
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
+
+
+def _quiet_signals() -> None:
+    """Ignore further Ctrl-C / SIGTERM while the process exits (no second traceback)."""
+    import signal
+
+    for s in (signal.SIGINT, signal.SIGTERM):
+        try:
+            signal.signal(s, signal.SIG_IGN)
+        except (ValueError, OSError):
+            pass
+
+
+def _quiet_stdout() -> None:
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass

@@ -14,6 +14,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .._atomic import show
+from .._inputs import read_json
 from ..errors import InputError
 from ..labels import clip_left
 from ..transform import Transform2D
@@ -75,19 +77,8 @@ class Truth:
 
 
 def _read_json(path: Path, what: str):
-    if not path.exists():
-        raise InputError(f"{path}: no such {what} file; check the path")
-    if path.is_dir():
-        raise InputError(f"{path}: is a directory, not a {what} file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeError) as exc:
-        raise InputError(f"{path}: the {what} file cannot be read ({exc})") from None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputError(f"{path}: is not valid JSON (line {exc.lineno}, column {exc.colno}: "
-                         f"{exc.msg}); fix the {what} file") from None
+    """A JSON file: regular, bounded in size and nesting; one-line errors (see _inputs)."""
+    return read_json(path, f"{what} file")
 
 
 def read_truth(path) -> Truth:
@@ -117,12 +108,12 @@ def read_truth(path) -> Truth:
         if not isinstance(name, str) or not name:
             raise InputError(f"{path}: robot {i + 1} has no 'name'")
         if name in robots:
-            raise InputError(f"{path}: robot name {name!r} appears twice; names must be unique")
+            raise InputError(f"{path}: robot name {show(name)} appears twice; names must be unique")
         try:
             robots[name] = Transform2D.from_dict(r.get("transform"))
         except ValueError:
-            raise InputError(f"{path}: robot {name!r} needs a 'transform' with numeric x, y, "
-                             f"theta, got {r.get('transform')!r}") from None
+            raise InputError(f"{path}: robot {show(name)} needs a 'transform' with numeric x, y, "
+                             f"theta, got {show(r.get('transform'))}") from None
         m = r.get("map")
         maps[name] = path.parent / (m if isinstance(m, str) and m.strip() else f"{name}.yaml")
     world_path = Path(world.strip())
@@ -130,7 +121,7 @@ def read_truth(path) -> Truth:
         beside = path.parent / world_path
         world_path = beside if beside.exists() or not world_path.exists() else world_path
     if not world_path.exists():
-        raise InputError(f"{path}: the world map {world!r} was not found beside the truth file "
+        raise InputError(f"{path}: the world map {show(world)} was not found beside the truth file "
                          f"or in the current directory; fix 'world' or restore the map")
     return Truth(path=path, world=world_path, robots=robots, maps=maps)
 
@@ -150,8 +141,8 @@ def find_report(merged, report=None) -> Path | None:
     for cand in (merged.with_name(merged.stem + ".report.json"), merged.with_name("report.json")):
         if cand.is_file():
             try:
-                doc = json.loads(cand.read_text(encoding="utf-8"))
-            except (OSError, UnicodeError, json.JSONDecodeError):
+                doc = read_json(cand, "merge report")
+            except InputError:
                 continue
             if isinstance(doc, dict) and isinstance(doc.get("output"), str) and _names_merged(doc, merged):
                 return cand
@@ -218,7 +209,7 @@ def read_report(path, merged) -> dict:
         raise InputError(f"{path}: not a merge report (it needs 'reference' and 'maps'); give the "
                          f"report 'fusionkit merge' wrote")
     if not _names_merged(doc, merged):
-        raise InputError(f"{path}: this report is for {doc['output']}, not {merged}; give the "
+        raise InputError(f"{path}: this report is for {show(doc['output'])}, not {merged}; give the "
                          f"report of this merged map with --report")
     maps = []
     for i, m in enumerate(doc["maps"]):
@@ -228,8 +219,8 @@ def read_report(path, merged) -> dict:
         try:
             t = None if t is None else Transform2D.from_dict(t)
         except ValueError:
-            raise InputError(f"{path}: map {m['input']} has a transform without numeric x, y, "
-                             f"theta: {m.get('transform')!r}") from None
+            raise InputError(f"{path}: map {show(m['input'])} has a transform without numeric x, y, "
+                             f"theta: {show(m.get('transform'))}") from None
         conf = m.get("confidence")
         conf = float(conf) if isinstance(conf, (int, float)) and not isinstance(conf, bool) else None
         maps.append({"input": m["input"], "merged": bool(m.get("merged", t is not None)) and t is not None,

@@ -6,7 +6,7 @@ import json
 import math
 from pathlib import Path
 
-from .._atomic import check_not_input, write_text_atomic
+from .._atomic import check_distinct, check_not_input, check_writable, show
 from ..errors import InputError
 from ..labels import clip_left
 from ._common import Progress, add_merge_options, merge_config_from_args
@@ -36,24 +36,24 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..mapio import save_map
+    from ..mapio import group_map_files, save_maps
     from ..pipeline import MergeResult, merge
 
     out = Path(args.output)
     if out.suffix not in (".yaml", ".yml"):
-        raise InputError(f"{out}: the output must be a map YAML path ending in .yaml")
+        raise InputError(f"{show(str(out), 200)}: the output must be a map YAML path ending in .yaml")
     report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
     image_path = out.with_suffix(".pgm")
     if len(args.maps) < 2:
         raise InputError("give at least two maps to merge")
     inputs = list(args.maps)
-    check_not_input([out, report_path, image_path],
-                    inputs + [Path(m).with_suffix(".pgm") for m in inputs]
-                    + [Path(m).with_name(Path(m).stem + ".scans.npz") for m in inputs])
+    check_writable([out, image_path, report_path])
+    check_distinct([("-o", out), ("the output's image", image_path), ("--report", report_path)])
+    check_not_input([out, image_path, report_path], protected_inputs(inputs))
     reference = 0
     if args.reference is not None:
         if args.reference not in inputs:
-            raise InputError(f"--reference {args.reference} is not one of the maps given")
+            raise InputError(f"--reference {show(args.reference, 200)} is not one of the maps given")
         reference = inputs.index(args.reference)
     config = merge_config_from_args(args, reference=reference)
     progress = Progress("merging", enabled=None if not args.quiet else False)
@@ -66,13 +66,22 @@ def run(args) -> int:
 
     result: MergeResult = merge(inputs, config=config, callback=callback)
     progress.close()
-    save_map(result.grid, out, inputs=inputs)
     report = result.report(inputs, output=str(args.output))
-    write_text_atomic(report_path, json.dumps(report, indent=2) + "\n")
+    # One set: merged map + report (the commit point); group maps of an earlier merge into the
+    # same output that this one does not write are removed with it.
+    save_maps([(result.grid, out)], (report_path, json.dumps(report, indent=2) + "\n"),
+              inputs=inputs, remove=group_map_files(out))
     if not args.quiet:
         print(format_placements(result, inputs))
         print(f"fused map: {out} ({result.grid.cols}x{result.grid.rows} cells); report: {report_path}")
     return EXIT_ALL_MERGED if result.all_merged else EXIT_SOME_LEFT_OUT
+
+
+def protected_inputs(inputs) -> list[Path]:
+    """Every file a merge reads: each map YAML, the image it names and its scan log."""
+    from ..mapio import _protected
+
+    return _protected(inputs) + [Path(m).with_name(Path(m).stem + ".scans.npz") for m in inputs]
 
 
 def format_placements(result, names) -> str:

@@ -6,9 +6,7 @@ import json
 import math
 import textwrap
 import time
-from pathlib import Path
 
-from .._atomic import write_text_atomic
 from ._common import Progress, add_merge_options, int_range, merge_config_from_args
 
 
@@ -93,20 +91,25 @@ def format_run(result, names, errors) -> str:
 
 def run(args) -> int:
     from ..fusion import fuse_maps
-    from ..mapio import load_map, save_map
+    from ..mapio import group_map_files, load_map, save_maps
     from ..metrics import format_table1, table1, transform_errors
     from ..pipeline import merge
+    from ..sim_output import check_run_dir
     from ..simulate import SimulationConfig, simulate, write_run
     from ..worlds import default_world
 
-    out = Path(args.out)
+    out = check_run_dir(args.out)  # before any work
     world = load_map(args.world) if args.world else default_world()
     sim_cfg = SimulationConfig(robots=args.robots, poses=args.poses, seed=args.sim_seed)
     t0 = time.perf_counter()
     progress = Progress("simulating")
     sim = simulate(world, sim_cfg, progress=progress)
     progress.close()
-    write_run(sim, out, world_path=args.world)
+    merged_path = out / "merged.yaml"
+    # The merged set of an earlier run goes with its robots (until this run's merge replaces it).
+    write_run(sim, out, world_path=args.world,
+              stale=[merged_path, merged_path.with_suffix(".pgm"), out / "merged.report.json",
+                     *group_map_files(merged_path)])
     t_sim = time.perf_counter() - t0
     files = [f"robot_{k + 1}.yaml" for k in range(args.robots)]
     names = [f.removesuffix(".yaml") for f in files]
@@ -119,10 +122,10 @@ def run(args) -> int:
 
     result = merge(inputs, config=config, callback=callback)
     progress.close()
-    merged_path = out / "merged.yaml"
-    save_map(result.grid, merged_path, inputs=inputs)
-    write_text_atomic(out / "merged.report.json",
-                      json.dumps(result.report(inputs, output=str(merged_path)), indent=2) + "\n")
+    save_maps([(result.grid, merged_path)],
+              (out / "merged.report.json",
+               json.dumps(result.report(inputs, output=str(merged_path)), indent=2) + "\n"),
+              inputs=inputs, remove=group_map_files(merged_path))
 
     # Table 1: the fused map after each step, placed in the world by the reference's true pose
     ref_true = sim.robots[config.reference].transform

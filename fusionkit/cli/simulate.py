@@ -79,10 +79,12 @@ def run(args) -> int:
     from ..errors import InputError
     from ..mapio import load_map
     from ..mapping import MappingConfig
+    from ..sim_output import check_run_dir
     from ..simulate import LidarConfig, MotionConfig, SimulationConfig, simulate, write_run
     from ..worlds import DEFAULT_RESOLUTION, DEFAULT_SIZE, default_world, make_world
 
     t0 = time.perf_counter()
+    check_run_dir(args.out)  # before any work: a file, a read-only or a foreign folder
     lidar = LidarConfig(beams=args.beams, fov_deg=args.fov, max_range=args.max_range,
                         range_noise=args.range_noise)
     motion = MotionConfig(mode=args.motion, speed=args.speed, scan_period=args.scan_period,

@@ -1,0 +1,80 @@
+"""Interrupts as exceptions: SIGINT raises :class:`KeyboardInterrupt`, SIGTERM :class:`Terminated`.
+
+Both unwind the stack like any exception, so every ``with``/``finally`` that removes temporary
+files or rolls back a half-done write runs before the process exits. :func:`deferred` holds
+both signals back for the few system calls that must not be separated (a commit of an output
+set), and :func:`pending` tells such code that the user asked to stop, so it can roll back
+instead of committing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import threading
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
+
+__all__ = ["Terminated", "install", "deferred", "pending", "EXIT_SIGINT", "EXIT_SIGTERM"]
+
+#: Exit statuses of a command stopped by SIGINT (Ctrl-C) and SIGTERM (128 + signal number).
+EXIT_SIGINT = 130
+EXIT_SIGTERM = 143
+
+_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_pending: list[int] = []
+_deferring = 0
+
+
+class Terminated(KeyboardInterrupt):
+    """The process received SIGTERM; unwinds like Ctrl-C (so cleanup code runs) and exits 143."""
+
+
+def _raise(signum, frame):  # noqa: ARG001 (signal handler signature)
+    if _deferring:
+        _pending.append(signum)
+        return
+    if signum == signal.SIGTERM:
+        raise Terminated()
+    raise KeyboardInterrupt()
+
+
+def install() -> None:
+    """Turn SIGINT and SIGTERM into exceptions (main thread only; elsewhere a no-op)."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for s in _SIGNALS:
+        signal.signal(s, _raise)
+
+
+def pending() -> bool:
+    """True when SIGINT or SIGTERM arrived inside :func:`deferred` and is waiting."""
+    return bool(_pending)
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """Hold SIGINT and SIGTERM back inside the block; deliver them when it ends.
+
+    Only in the main thread with :func:`install` handlers in place; elsewhere the block runs
+    unchanged (Python delivers signals to the main thread only, so a worker thread is never
+    interrupted mid-block anyway).
+    """
+    global _deferring
+    active = (threading.current_thread() is threading.main_thread()
+              and all(signal.getsignal(s) is _raise for s in _SIGNALS))
+    if not active:
+        yield
+        return
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+        if not _deferring and _pending:
+            signum = _pending[0]
+            _pending.clear()
+            os.kill(os.getpid(), signum)  # delivered again, now to the raising handler

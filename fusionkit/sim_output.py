@@ -1,0 +1,142 @@
+"""Writing a simulated run to disk (CONTRACTS section 5), crash-safe."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+from pathlib import Path
+
+from ._atomic import check_not_input, check_out_dir, make_out_dir, write_set
+from .errors import FusionkitError, InputError
+from .mapping import MappingConfig
+
+__all__ = ["write_run", "check_run_dir"]
+
+
+_RUN_SUFFIXES = (".yaml", ".pgm", ".scans.npz")
+#: Names a simulation writes; only files of these names are ever removed from a run folder.
+_ROBOT_NAME = re.compile(r"robot_[1-9][0-9]{0,3}")
+
+
+def _previous_robot_files(out: Path) -> list[Path]:
+    """Robot files an earlier run in ``out`` wrote: ``robot_K`` files that its truth.json lists.
+
+    Only names of the form a simulation writes count: whatever else a truth.json names (a
+    hand-edited or hostile one) is never removed.
+    """
+    from ._inputs import read_json
+
+    try:
+        doc = read_json(out / "truth.json", "truth.json")
+        names = [r["name"] for r in doc.get("robots", [])]
+    except (FusionkitError, TypeError, KeyError, AttributeError):
+        return []
+    files = []
+    for n in names:
+        if isinstance(n, str) and _ROBOT_NAME.fullmatch(n):
+            files += [out / (n + s) for s in _RUN_SUFFIXES]
+    return files
+
+
+def check_run_dir(out_dir) -> Path:
+    """Refuse, before any work, a run folder :func:`write_run` would not write: a file, a folder
+    that is not writable, or a non-empty folder without the truth.json of an earlier run."""
+    out = check_out_dir(out_dir)
+    try:
+        nonempty = out.is_dir() and any(out.iterdir())
+    except OSError as exc:
+        raise InputError(f"{out}: the folder cannot be listed ({exc.strerror or exc}); check its "
+                         f"permissions") from None
+    if nonempty and not (out / "truth.json").is_file():
+        raise InputError(
+            f"{out}: the directory is not empty and holds no truth.json of an earlier run; "
+            f"choose a new or empty directory")
+    return out
+
+
+def write_run(sim, out_dir, *, world_path=None, stale=()) -> Path:
+    """Write a simulation as CONTRACTS section 5 lays it out, and return the truth.json path.
+
+    Files, in ``out_dir``: per robot ``robot_k.yaml`` + ``robot_k.pgm`` (its map, own frame)
+    and ``robot_k.scans.npz`` (its scan log, own frame); ``world.yaml`` + ``world.pgm`` (the
+    ground truth); ``truth.json`` with ``world`` (``"world.yaml"``, relative to truth.json),
+    ``seed``, ``robots`` (per robot ``name``, ``map``, ``transform`` own frame -> world,
+    ``poses``, ``path_length_m``), ``config`` (every setting) and, when ``world_path`` is
+    given, ``world_source``.
+
+    Parameters
+    ----------
+    sim : Simulation
+    out_dir : str or os.PathLike
+        Must not exist, be empty, or hold an earlier run (a ``truth.json``): that run's files
+        are replaced (its ``robot_K`` files that the new run does not write are removed; no
+        other file is ever removed).
+    world_path : str or os.PathLike, optional
+        The map file the world was loaded from; it is recorded, and never overwritten or
+        removed (nor the image it names, nor a scan log beside it).
+    stale : paths, optional
+        Files made from the earlier run that the new run makes wrong (a merged map of the old
+        robots); removed with the same commit.
+
+    Raises
+    ------
+    InputError
+        ``out_dir`` is a file, or a non-empty directory without a ``truth.json``, or writing
+        would overwrite or remove ``world_path``, or the folder cannot be written.
+
+    Notes
+    -----
+    The run is one set of files (:func:`fusionkit._atomic.write_set`) with ``truth.json`` as
+    its commit point: on a failure or an interrupt the folder is left as it was; after a crash
+    the next write to it finishes or undoes the interrupted one.
+    """
+    from .mapio import _protected, encode_map
+    from .scanlog import encode_scans, scans_path_for
+    from .simulate import Simulation
+
+    if not isinstance(sim, Simulation):
+        raise InputError(f"write_run needs a Simulation, got {type(sim).__name__}")
+    out = check_run_dir(out_dir)
+    previous = _previous_robot_files(out) if out.is_dir() else []
+    names = [r.name for r in sim.robots]
+    files = [n + s for n in names for s in _RUN_SUFFIXES] + ["world.yaml", "world.pgm", "truth.json"]
+    protected: list[Path] = []
+    if world_path is not None:
+        protected = _protected([world_path]) + [scans_path_for(world_path)]
+    check_not_input([out / f for f in files], protected)
+    keep = {out / f for f in files}
+    inputs = {q.resolve() for q in protected}
+    stale = [p for p in [*previous, *map(Path, stale)]
+             if p not in keep and p.is_file() and p.resolve() not in inputs]
+
+    make_out_dir(out)
+    payloads = []
+    yamls = []
+    robots = []
+    for r in sim.robots:
+        image, pixels, text = encode_map(r.grid, out / f"{r.name}.yaml")
+        payloads += [(image, pixels), (out / f"{r.name}.yaml", text),
+                     (out / f"{r.name}.scans.npz", encode_scans(r.scans))]
+        yamls.append(out / f"{r.name}.yaml")
+        robots.append({"name": r.name, "map": f"{r.name}.yaml",
+                       "transform": r.transform.as_dict(digits=9),
+                       "poses": int(r.scans.n_scans),
+                       "path_length_m": round(r.path_length, 3)})
+    world = sim.world.with_data(sim.world.trinary(), name="world")
+    image, pixels, text = encode_map(world, out / "world.yaml")
+    payloads += [(image, pixels), (out / "world.yaml", text)]
+    yamls.append(out / "world.yaml")
+    truth = {"world": "world.yaml", "seed": sim.config.seed, "robots": robots}
+    if world_path is not None:
+        truth["world_source"] = str(world_path)
+    cfg = dataclasses.asdict(sim.config)
+    if sim.config.mapping is None:
+        cfg["mapping"] = dataclasses.asdict(MappingConfig(resolution=sim.world.resolution))
+    truth["config"] = cfg
+    # Images before the YAMLs that name them (the YAMLs are taken away first), truth.json last.
+    order = sorted(payloads, key=lambda f: f[0].suffix in (".yaml", ".yml"))
+    write_set(order + [(p, None) for p in stale],
+              (out / "truth.json", (json.dumps(truth, indent=2) + "\n").encode("utf-8")),
+              hide_first=yamls)
+    return out / "truth.json"

@@ -1,0 +1,403 @@
+"""Crash safety of every output: a write interrupted at each step leaves one whole set.
+
+The writes are interrupted the ways they fail in the field: an exception or a signal at each
+rename (in process), ``kill -9`` at each rename (a child process), SIGTERM and SIGINT to the
+command line, and two writers on one output. After each, every file set left behind must be
+whole and of one write: the old one or the new one, never a mix, never a temporary file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit import _atomic, _signals
+from fusionkit.errors import InputError
+from fusionkit.grid import OccupancyGrid
+from fusionkit.mapio import load_map, save_map, save_maps
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _grid(seed: int, shape=(7, 9), res=0.05) -> OccupancyGrid:
+    rng = np.random.default_rng(seed)
+    data = rng.choice(np.array([-1, 0, 100], np.int8), size=shape)
+    return OccupancyGrid(data, res, (float(seed), -float(seed), 0.1 * seed))
+
+
+OLD = {"merged": _grid(1), "merged.group1": _grid(2, (5, 4), 0.1)}
+NEW = {"merged": _grid(3, (11, 6), 0.2), "merged.group1": _grid(4, (3, 8))}
+
+
+def _write(out: Path, grids: dict, tag: str, by: str = "", **kw) -> None:
+    maps = [(g, out / f"{name}.yaml") for name, g in grids.items()]
+    save_maps(maps, (out / "merged.report.json", json.dumps({"write": tag, "by": by}) + "\n"), **kw)
+
+
+def _same(a: OccupancyGrid, b: OccupancyGrid) -> bool:
+    return (a.data.shape == b.data.shape and (a.trinary() == b.trinary()).all()
+            and a.resolution == b.resolution and a.origin == b.origin)
+
+
+def _state(out: Path) -> str:
+    """``"old"``, ``"new"`` or ``"none"`` for a consistent folder; fails on anything else.
+
+    Consistent: no temporary, backup or journal file; every map present loads and is one
+    write's map; with the report present, every map of that write is present and of it.
+    """
+    leftovers = [p.name for p in out.iterdir() if p.name.startswith(".")]
+    assert not leftovers, f"left behind: {leftovers}"
+    report = out / "merged.report.json"
+    tags = set()
+    for name in OLD:
+        if (out / f"{name}.yaml").exists():
+            g = load_map(out / f"{name}.yaml")
+            tag = "old" if _same(g, OLD[name]) else "new" if _same(g, NEW[name]) else None
+            assert tag, f"{name}.yaml loads as neither write's map"
+            tags.add(tag)
+    if report.exists():
+        tag = json.loads(report.read_text())["write"]
+        assert tags == {tag}, f"report of the {tag} write beside maps of {tags}"
+        assert all((out / f"{n}.yaml").exists() for n in OLD), "the report names a missing map"
+        return tag
+    # No report: a write is unfinished (killed); the maps a reader finds are all of one write.
+    assert len(tags) <= 1, f"maps of two writes together: {tags}"
+    return "unfinished"
+
+
+# -- in process: an exception or a signal at each rename ----------------------------------------
+def _count_replaces(tmp_path) -> int:
+    calls = []
+    real = os.replace
+
+    def counting(src, dst):
+        calls.append(dst)
+        return real(src, dst)
+
+    out = tmp_path / "count"
+    out.mkdir()
+    _write(out, OLD, "old")
+    _atomic.os.replace = counting
+    try:
+        _write(out, NEW, "new")
+    finally:
+        _atomic.os.replace = real
+    return len(calls)
+
+
+@pytest.mark.parametrize("fault", [OSError(28, "No space left on device"), KeyboardInterrupt(),
+                                   _signals.Terminated()], ids=["disk full", "SIGINT", "SIGTERM"])
+def test_a_write_failing_at_any_rename_leaves_the_old_set_whole(tmp_path, monkeypatch, fault):
+    n = _count_replaces(tmp_path)
+    assert n >= 6  # journal, backups, images, YAMLs, report: the steps under test
+    real = os.replace
+    for k in range(n):
+        out = tmp_path / f"at{k}"
+        out.mkdir()
+        _write(out, OLD, "old")
+        before = {p.name: p.read_bytes() for p in out.iterdir()}
+        calls = []
+
+        def failing(src, dst):
+            calls.append(dst)
+            if len(calls) == k + 1:
+                raise fault
+            return real(src, dst)
+
+        monkeypatch.setattr(_atomic.os, "replace", failing)
+        with pytest.raises((InputError, KeyboardInterrupt)):
+            _write(out, NEW, "new")
+        monkeypatch.setattr(_atomic.os, "replace", real)
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == before, f"rename {k + 1}"
+        _write(out, NEW, "new")  # the next write succeeds and leaves only its own set
+        assert _state(out) == "new"
+
+
+def test_a_signal_during_the_commit_rolls_back_then_interrupts(tmp_path, monkeypatch):
+    """With the command-line handlers, SIGTERM arriving mid-commit is held until the old set
+    is put back, then ends the command."""
+    out = tmp_path / "o"
+    out.mkdir()
+    _write(out, OLD, "old")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    real, calls = os.replace, []
+
+    def signalled(src, dst):
+        calls.append(dst)
+        if len(calls) == 4:
+            os.kill(os.getpid(), signal.SIGTERM)
+        return real(src, dst)
+
+    try:
+        _signals.install()
+        monkeypatch.setattr(_atomic.os, "replace", signalled)
+        with pytest.raises(_signals.Terminated):
+            _write(out, NEW, "new")
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_stale_group_maps_go_with_the_commit_and_come_back_on_failure(tmp_path, monkeypatch):
+    out = tmp_path / "o"
+    out.mkdir()
+    save_maps([(OLD["merged"], out / "merged.yaml"), (OLD["merged.group1"], out / "merged.group1.yaml")],
+              (out / "merged.report.json", "{}"))
+    from fusionkit.mapio import group_map_files
+    stale = group_map_files(out / "merged.yaml")
+    assert [p.name for p in stale] == ["merged.group1.pgm", "merged.group1.yaml"]
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    monkeypatch.setattr(_atomic, "_fsync_dir", lambda d: (_ for _ in ()).throw(KeyboardInterrupt()))
+    with pytest.raises(KeyboardInterrupt):
+        save_maps([(NEW["merged"], out / "merged.yaml")], (out / "merged.report.json", "{}"), remove=stale)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    monkeypatch.undo()
+    save_maps([(NEW["merged"], out / "merged.yaml")], (out / "merged.report.json", "{}"), remove=stale)
+    assert sorted(p.name for p in out.iterdir()) == ["merged.pgm", "merged.report.json", "merged.yaml"]
+
+
+# -- child processes: kill -9, SIGTERM, SIGINT at a controlled rename ---------------------------
+_CHILD = textwrap.dedent("""
+    import json, os, signal, sys, time
+    sys.path.insert(0, {tests!r})
+    from test_crash_safety import NEW, OLD, _write
+    from pathlib import Path
+    from fusionkit import _atomic, _signals
+    out, k, how = Path(sys.argv[1]), int(sys.argv[2]), sys.argv[3]
+    real, calls = os.replace, []
+    def held(src, dst):
+        calls.append(dst)
+        if len(calls) == k:
+            if how == "hold":  # wait at this rename (holding the lock) until told to go on
+                Path(str(out) + ".held").touch()
+                while not Path(str(out) + ".go").exists():
+                    time.sleep(0.01)
+            else:
+                os.kill(os.getpid(), getattr(signal, how))
+        return real(src, dst)
+    _atomic.os.replace = held
+    _signals.install()
+    try:
+        if how == "none":
+            _write(out, OLD, "old", by="second")
+        else:
+            _write(out, NEW, "new")
+    except KeyboardInterrupt as exc:
+        sys.exit(143 if isinstance(exc, _signals.Terminated) else 130)
+""")
+
+
+def _child(out: Path, k: int, how: str) -> subprocess.Popen:
+    code = _CHILD.format(tests=str(Path(__file__).parent))
+    env = {**os.environ, "NUMBA_THREADING_LAYER": "threadsafe"}
+    return subprocess.Popen([sys.executable, "-c", code, str(out), str(k), how], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
+
+
+@pytest.mark.parametrize("how", ["SIGKILL", "SIGTERM", "SIGINT"])
+def test_a_process_killed_at_any_rename_leaves_one_whole_set(tmp_path, how):
+    n = _count_replaces(tmp_path)
+    for k in range(1, n + 1):
+        out = tmp_path / f"{how}{k}"
+        out.mkdir()
+        _write(out, OLD, "old")
+        before = {p.name: p.read_bytes() for p in out.iterdir()}
+        proc = _child(out, k, how)
+        try:
+            _, err = proc.communicate(timeout=120)
+        finally:
+            proc.kill()
+        if how == "SIGKILL":
+            assert proc.returncode == -signal.SIGKILL
+            # What a reader finds right after the crash: maps that load are right; a report
+            # only beside its own maps (it is absent while a write is unfinished).
+            leftover = [p for p in out.iterdir() if p.name.startswith(".")]
+            for p in leftover:  # set them aside to check what a reader sees
+                p.rename(tmp_path / f"{p.name}.{how}{k}")
+            _state(out)
+            for p in leftover:
+                (tmp_path / f"{p.name}.{how}{k}").rename(p)
+            # The next write to the output finishes or undoes the killed one first.
+            _atomic._recover(out / "merged.report.json")
+            _atomic._sweep([out / "merged.report.json", out / "merged.yaml", out / "merged.pgm",
+                            out / "merged.group1.yaml", out / "merged.group1.pgm"])
+            assert _state(out) in ("old", "new"), f"killed at rename {k}"
+        else:
+            assert proc.returncode == (143 if how == "SIGTERM" else 130), err.decode()
+            assert b"Traceback" not in err
+            if k < n:  # before the commit point: rolled back
+                assert {p.name: p.read_bytes() for p in out.iterdir()} == before, f"rename {k}"
+            else:
+                assert _state(out) == "new"
+
+
+def test_two_writers_on_one_output_end_with_one_whole_set(tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    _write(out, OLD, "old")
+    first = _child(out, 3, "hold")  # writes NEW; held mid-commit, holding the lock
+    try:
+        deadline = time.monotonic() + 120
+        while not Path(str(out) + ".held").exists():
+            assert first.poll() is None and time.monotonic() < deadline, first.stderr.read()
+            time.sleep(0.05)
+        # A second writer (of OLD) to the same output waits for the first instead of mixing.
+        second = _child(out, 0, "none")
+        time.sleep(1.0)
+        assert second.poll() is None, "the second writer did not wait for the lock"
+        Path(str(out) + ".go").touch()
+        assert first.wait(timeout=120) == 0
+        assert second.wait(timeout=120) == 0
+    finally:
+        first.kill()
+        if "second" in locals():
+            second.kill()
+    Path(str(out) + ".held").unlink()
+    Path(str(out) + ".go").unlink()
+    assert _state(out) == "old"  # the second writer's set, whole, written after the first's
+    assert json.loads((out / "merged.report.json").read_text())["by"] == "second"
+
+
+def test_a_killed_write_leaves_no_map_naming_an_image_of_another_write(tmp_path):
+    """The worst outcome of the old writer: kill -9 between the image and the YAML left the
+    old YAML beside the new image, a map that loads and is wrong."""
+    out = tmp_path / "m"
+    out.mkdir()
+    save_map(OLD["merged"], out / "merged.yaml")
+    real, calls = os.replace, []
+
+    class Killed(BaseException):
+        pass
+
+    def kill_after_image(src, dst):
+        real(src, dst)
+        calls.append(dst)
+        if str(dst).endswith(".pgm"):
+            raise Killed()  # stands for kill -9: no cleanup below this point may matter
+
+    _atomic.os.replace = kill_after_image
+    orig = _atomic._rollback
+    _atomic._rollback = lambda entries: False  # a killed process rolls nothing back
+    try:
+        with pytest.raises(Killed):
+            save_map(NEW["merged"], out / "merged.yaml")
+    finally:
+        _atomic.os.replace = real
+        _atomic._rollback = orig
+    assert not (out / "merged.yaml").exists()  # the old YAML is not left naming the new image
+    save_map(OLD["merged"], out / "merged.yaml")  # the next write recovers and writes
+    assert _same(load_map(out / "merged.yaml"), OLD["merged"])
+    assert sorted(p.name for p in out.iterdir()) == ["merged.pgm", "merged.yaml"]
+
+
+# -- the command line: one line, exit 130 / 143, nothing half-written ---------------------------
+_CLI = textwrap.dedent("""
+    import os, signal, sys
+    from fusionkit import _atomic
+    k, how, argv = int(sys.argv[1]), sys.argv[2], sys.argv[3:]
+    real, calls = os.replace, []
+    def signalled(src, dst):
+        calls.append(dst)
+        if len(calls) == k:
+            os.kill(os.getpid(), getattr(signal, how))
+        return real(src, dst)
+    if k:
+        _atomic.os.replace = signalled
+    else:  # while computing, before anything is written
+        import fusionkit.simulate as sim
+        compute = sim.simulate
+        def interrupted(*a, **kw):
+            os.kill(os.getpid(), getattr(signal, how))
+            return compute(*a, **kw)
+        sim.simulate = interrupted
+    from fusionkit.cli import main
+    sys.exit(main(argv))
+""")
+
+
+def _files(folder: Path) -> dict:
+    return {p.name: p.read_bytes() for p in folder.iterdir()}
+
+
+@pytest.fixture(scope="module")
+def earlier_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "run"
+    from fusionkit.cli import main
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        assert main(["simulate", "--robots", "2", "--poses", "40", "--seed", "1", "--out", str(out),
+                     "--quiet"]) == 0
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    return out
+
+
+@pytest.mark.parametrize("k, how, code", [(0, "SIGINT", 130), (0, "SIGTERM", 143),
+                                          (6, "SIGTERM", 143), (9, "SIGINT", 130)],
+                         ids=["SIGINT computing", "SIGTERM computing", "SIGTERM mid-commit",
+                              "SIGINT mid-commit"])
+def test_a_signalled_command_exits_130_or_143_with_one_line_and_its_outputs_unchanged(
+        earlier_run, k, how, code):
+    before = _files(earlier_run)
+    env = {**os.environ, "NUMBA_THREADING_LAYER": "threadsafe"}
+    proc = subprocess.run(
+        [sys.executable, "-c", _CLI, str(k), how, "simulate", "--robots", "3", "--poses", "40",
+         "--seed", "2", "--out", str(earlier_run), "--quiet"],
+        capture_output=True, text=True, timeout=300, env=env, cwd=ROOT)
+    assert proc.returncode == code, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    assert lines[0].startswith("fusionkit simulate: " + ("terminated" if how == "SIGTERM" else "interrupted"))
+    assert _files(earlier_run) == before
+
+
+def test_ctrl_c_during_start_up_is_one_line_and_exit_130(monkeypatch, capsys):
+    import importlib
+
+    from fusionkit import cli
+
+    def interrupted(name, package=None):
+        raise KeyboardInterrupt()
+
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    monkeypatch.setattr(importlib, "import_module", interrupted)
+    try:
+        assert cli.main(["merge", "a.yaml", "b.yaml", "-o", "m.yaml"]) == 130
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("fusionkit: interrupted")
+
+
+def test_an_export_sweeps_the_temporary_folder_a_killed_export_left(tmp_path):
+    from fusionkit.rosbag_export import export_rosbag
+    from fusionkit.scanlog import ScanLog, save_scans
+
+    run = tmp_path / "run"
+    run.mkdir()
+    rng = np.random.default_rng(0)
+    save_scans(run / "robot_1.scans.npz", ScanLog(rng.normal(size=(4, 3)), rng.uniform(1, 2, (4, 6)),
+                                                   -1.0, 0.4, 5.0))
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    killed = tmp_path / f".run_bag.{int(dead.stdout)}.abc123.tmp"  # what a killed export leaves
+    (killed / "run_bag").mkdir(parents=True)
+    (killed / "run_bag" / "run_bag_0.db3").write_bytes(b"half")
+    mine = tmp_path / f".run_bag.{os.getpid()}.xyz789.tmp"  # a live export's folder is left alone
+    mine.mkdir()
+    res = export_rosbag(run, tmp_path / "run_bag")
+    assert res.path.is_dir() and not killed.exists() and mine.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [mine.name, "run", "run_bag"]
