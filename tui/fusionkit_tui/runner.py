@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
-from fusionkit._atomic import check_not_input, write_text_atomic
+from fusionkit._atomic import check_not_input
 from fusionkit.errors import FusionkitError, InputError
 from fusionkit.pipeline import MergeConfig, MergeEvent, MergeResult, merge
 
@@ -273,7 +273,7 @@ def protected_files(inputs: Sequence) -> list[Path]:
 def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPaths:
     """Write the fused map (YAML + PGM) and the merge report (docs/formats.md).
 
-    Each file is written atomically and no input map, image or scan log is ever overwritten;
+    The files are written as one set (:func:`fusionkit.mapio.save_maps`) and no input map, image or scan log is ever overwritten;
     existing output files are replaced (ask first).
 
     Parameters
@@ -289,15 +289,18 @@ def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPat
     InputError
         A bad output name, a missing directory, or an output that is one of the inputs.
     """
-    from fusionkit.mapio import save_map
+    from fusionkit.mapio import group_map_files, save_maps
 
     paths = export_paths(yaml_path)
     inputs = [str(p) for p in inputs]
     protected = protected_files(inputs)
     check_not_input(paths.all, protected)
-    save_map(result.grid, paths.yaml, inputs=protected)
     report = result.report(inputs, output=str(paths.yaml))
-    write_text_atomic(paths.report, json.dumps(report, indent=2) + "\n")
+    # One set with the report as its commit point: a reader never finds the map of one export
+    # beside the report of another, and group maps of an earlier merge of that name go with it.
+    save_maps([(result.grid, paths.yaml)],
+              (paths.report, json.dumps(report, indent=2) + "\n"),
+              inputs=protected, remove=group_map_files(paths.yaml))
     return paths
 
 
