@@ -211,3 +211,19 @@ def test_virtual_scans_see_the_map_walls_and_unknown_as_returns():
     inside = (r >= 0) & (r < 40) & (c >= 0) & (c < 60)
     assert inside.mean() > 0.99
     assert (d[r[inside], c[inside]] != 0).mean() > 0.95
+
+
+def test_paper_method_never_claims_a_map_the_fused_map_lacks():
+    # Two runs of the office: the paper's plan first aligns the other run's map onto robot 2,
+    # which fails; robot 1 is then aligned onto robot 2 itself. Every map reported merged must
+    # be in the fused map, and each fusion step must start from a placed map.
+    a = simulate(default_world(), SimulationConfig(robots=3, poses=800, seed=1))
+    b = simulate(default_world(), SimulationConfig(robots=3, poses=800, seed=7))
+    grids = [a.robots[0].grid, a.robots[1].grid, b.robots[0].grid]
+    scans = [a.robots[0].scans, a.robots[1].scans, b.robots[0].scans]
+    res = merge(grids, scans=scans, config=MergeConfig(method="spectral-pso"))
+    merged = {p.index for p in res.placements if p.merged}
+    assert merged == set(res.fused.order) == set(res.order)
+    assert {0, 1} <= merged
+    for anchor, new in res.fusion_order:
+        assert anchor in merged and new in merged

@@ -151,7 +151,11 @@ class SpectralPSO:
             confidence[new], overlap[new] = score, cells
             if ok:
                 transforms[new] = al.transform
-                accepted_order.append((anchor, new))
+                # the step's anchor may have been refused itself: the map is then fused onto the
+                # placed map it agrees with most, and the order must say so
+                onto = anchor if transforms[anchor] is not None else max(
+                    placed, key=lambda p: (_pair(agreements, p, new).count, -p))
+                accepted_order.append((onto, new))
             else:
                 reasons[new] = (f"best alignment agrees on {100 * score:.0f}% of {cells} overlapping "
                                 f"wall cells (needs {100 * config.accept:.0f}% of >= {config.min_overlap_cells})")
