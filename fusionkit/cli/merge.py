@@ -21,7 +21,8 @@ def register(sub) -> None:
                     "them (ROS map_server YAML in, YAML + PGM out). A NAME.scans.npz beside a map is "
                     "used when present; otherwise virtual scans are cast in the map's free space. "
                     "Exit status: 0 all maps merged, 3 some left out (not confidently placed), "
-                    "2 bad input.")
+                    "2 bad input. Maps linked among themselves but not to the reference are "
+                    "fused group by group into MERGED.group1.yaml, ... (listed in the report).")
     p.add_argument("maps", nargs="+", metavar="MAP.yaml", help="robot maps (two or more)")
     p.add_argument("-o", "--output", required=True, metavar="MERGED.yaml",
                    help="where to write the fused map (YAML + PGM beside it)")
@@ -36,7 +37,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..mapio import save_map
-    from ..pipeline import MergeResult, merge
+    from ..pipeline import MergeResult, group_output_paths, merge
 
     out = Path(args.output)
     if out.suffix not in (".yaml", ".yml"):
@@ -65,12 +66,20 @@ def run(args) -> int:
 
     result: MergeResult = merge(inputs, config=config, callback=callback)
     progress.close()
+    group_paths = group_output_paths(out, len(result.groups))
+    check_not_input(group_paths + [q.with_suffix(".pgm") for q in group_paths],
+                    inputs + [Path(m).with_suffix(".pgm") for m in inputs])
     save_map(result.grid, out, inputs=inputs)
+    for group, path in zip(result.groups, group_paths):
+        save_map(group.grid, path, inputs=inputs)
     report = result.report(inputs, output=str(args.output))
     write_text_atomic(report_path, json.dumps(report, indent=2) + "\n")
     if not args.quiet:
         print(format_placements(result, inputs))
         print(f"fused map: {out} ({result.grid.cols}x{result.grid.rows} cells); report: {report_path}")
+        for group, path in zip(result.groups, group_paths):
+            print(f"group {group.number} ({', '.join(str(inputs[k]) for k in group.members)}), "
+                  f"not linked to the reference: {path}")
     return EXIT_ALL_MERGED if result.all_merged else EXIT_SOME_LEFT_OUT
 
 

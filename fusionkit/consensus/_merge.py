@@ -31,9 +31,10 @@ PEERS = {
 }
 
 
-def _tree_from_pairs(n: int, reference: int, accepted: dict):
+def _tree_from_pairs(n: int, reference: int, accepted: dict, exclude=frozenset()):
     """Maximum spanning tree by confidence grown from ``reference`` over ``accepted``
-    (``(i, j) -> (transform j -> i, confidence)``); returns transforms, confidences, tree."""
+    (``(i, j) -> (transform j -> i, confidence)``), never reaching the maps in ``exclude``;
+    returns transforms, confidences, tree."""
     transforms = [None] * n
     conf = [0.0] * n
     transforms[reference] = Transform2D.identity()
@@ -43,7 +44,8 @@ def _tree_from_pairs(n: int, reference: int, accepted: dict):
         best = None
         for (i, j), (t, c) in accepted.items():
             for p, q, t_qp in ((i, j, t), (j, i, t.inverse)):
-                if transforms[p] is not None and transforms[q] is None and (best is None or c > best[0]):
+                if (transforms[p] is not None and transforms[q] is None and q not in exclude
+                        and (best is None or c > best[0])):
                     best = (c, p, q, t_qp)
         if best is None:
             return transforms, conf, tree
@@ -51,6 +53,30 @@ def _tree_from_pairs(n: int, reference: int, accepted: dict):
         transforms[q] = transforms[p] @ t_qp
         conf[q] = c
         tree.append((p, q))
+
+
+def _groups_from_pairs(n: int, transforms: list, accepted: dict):
+    """Groups of the maps left out that link among themselves over ``accepted``: per map its
+    group (0 placed, 1, 2, ... by size, None alone), its transform into its group's first map,
+    its confidence there; and each group's tree."""
+    found = []
+    remaining = [k for k in range(n) if transforms[k] is None]
+    placed = {k for k in range(n) if transforms[k] is not None}
+    while remaining:
+        root = remaining[0]
+        t_g, c_g, tree_g = _tree_from_pairs(n, root, accepted, exclude=placed)
+        members = [k for k in range(n) if t_g[k] is not None]
+        remaining = [k for k in remaining if k not in members]
+        if len(members) >= 2:
+            found.append((members, t_g, c_g, tree_g))
+    found.sort(key=lambda g: (-len(g[0]), g[0][0]))
+    group = [0 if transforms[k] is not None else None for k in range(n)]
+    g_t, g_c, trees = [None] * n, [0.0] * n, []
+    for number, (members, t_g, c_g, tree_g) in enumerate(found, start=1):
+        for k in members:
+            group[k], g_t[k], g_c[k] = number, t_g[k], c_g[k]
+        trees.append(tuple(tree_g))
+    return group, g_t, g_c, trees
 
 
 def _peer(method: str, grids, reference: int, seed: int, emit):
@@ -69,7 +95,8 @@ def _peer(method: str, grids, reference: int, seed: int, emit):
         tree = list(est.tree)
         reasons = ["" if transforms[k] is not None else
                    "not in the largest group of confidently matched maps" for k in range(n)]
-        return transforms, conf, tree, reasons, {}
+        groups = ([0 if t is not None else None for t in transforms], [None] * n, [0.0] * n, [])
+        return transforms, conf, tree, reasons, {}, groups
     accepted = {}
     todo = list(itertools.combinations(range(n), 2))
     estimates = {}
@@ -80,15 +107,16 @@ def _peer(method: str, grids, reference: int, seed: int, emit):
         if e.accepted and e.transform is not None:
             accepted[(i, j)] = (e.transform, float(e.confidence))
     transforms, conf, tree = _tree_from_pairs(n, reference, accepted)
+    groups = _groups_from_pairs(n, transforms, accepted)
     reasons = ["" if transforms[k] is not None else
                f"{method} accepted no pair linking it to the reference" for k in range(n)]
-    return transforms, conf, tree, reasons, estimates
+    return transforms, conf, tree, reasons, estimates, groups
 
 
 def merge_with(method: str, grids: list, scans: list, names: list, config, emit, t_start: float):
     """Run ``method`` (consensus or a peer) and build the :class:`MergeResult`."""
     from ..pairing import FusionPlan
-    from ..pipeline import MapPlacement, MergeEvent, MergeResult, MergeStep
+    from ..pipeline import MapGroup, MapPlacement, MergeEvent, MergeResult, MergeStep
     n = len(grids)
     ref = config.reference
     seconds: dict = {}
@@ -110,6 +138,8 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
         g = res.graph
         transforms, conf = list(g.transforms), list(g.confidences)
         tree, reasons = list(g.tree), list(g.reasons)
+        groups = (list(g.groups), list(g.group_transforms), list(g.group_confidences),
+                  list(g.group_trees))
         for (i, j), p in res.pairs.items():
             ov = p.best.check.overlap if p.best is not None else 0
             steps.append(MergeStep(i, j, None, p.transform, p.confidence, ov,
@@ -124,7 +154,7 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
         logs = tuple(ix.log for ix in res.indexes)
         seconds.update(res.seconds)
     else:
-        transforms, conf, tree, reasons, estimates = _peer(method, grids, ref, config.seed, emit)
+        transforms, conf, tree, reasons, estimates, groups = _peer(method, grids, ref, config.seed, emit)
         counts = np.zeros((n, n), int)
         for (i, j), e in estimates.items():
             counts[i, j] = counts[j, i] = int(bool(e.accepted))
@@ -139,14 +169,31 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
     t0 = time.perf_counter()
     emit(MergeEvent("fuse", 0, 1, "fusing"))
     fused = fuse_maps(grids, transforms, order=placed_order, keep_steps=True)
+    group_of, group_tf, group_conf, group_trees = groups
+    fused_groups = []
+    for number, g_tree in enumerate(group_trees, start=1):
+        members = [k for k in range(n) if group_of[k] == number]
+        order = [members[0]] + [q for _, q in g_tree if q != members[0]]
+        tf = [group_tf[k] if group_of[k] == number else None for k in range(n)]
+        fused_groups.append(MapGroup(number, tuple(members), tuple(tf),
+                                     fuse_maps(grids, tf, order=order).grid))
     seconds["fuse"] = time.perf_counter() - t0
     seconds["total"] = time.perf_counter() - t_start
-    placements = tuple(MapPlacement(k, names[k], transforms[k] is not None, transforms[k],
-                                    float(conf[k]) if transforms[k] is not None else 0.0,
-                                    int(overlap[k]), reasons[k] if transforms[k] is None else "")
-                       for k in range(n))
+    placements = []
+    for k in range(n):
+        g = group_of[k]
+        extra = {}
+        if g is not None:
+            extra["group"] = g
+        if g:
+            extra.update(group_transform=group_tf[k],
+                         group_reference=min(m for m in range(n) if group_of[m] == g))
+        placements.append(MapPlacement(
+            k, names[k], transforms[k] is not None, transforms[k],
+            float(conf[k]) if transforms[k] is not None else float(group_conf[k]) if g else 0.0,
+            int(overlap[k]), reasons[k] if transforms[k] is None else "", **extra))
     emit(MergeEvent("done", 1, 1, "done"))
-    return MergeResult(fused.grid, placements, tuple(tree), tuple(placed_order), fused, (), plan, {},
-                       tuple(steps), logs, virtual, config, seconds)
+    return MergeResult(fused.grid, tuple(placements), tuple(tree), tuple(placed_order), fused, (),
+                       plan, {}, tuple(steps), logs, virtual, config, seconds, tuple(fused_groups))
 
 
