@@ -87,6 +87,11 @@ class MergeConfig:
         Seed of every random step.
     consensus : ConsensusConfig or None
         Settings of the ``"consensus"`` method (None: its defaults).
+    max_false_merge : float
+        The false-merge risk accepted by the ``"consensus"`` method (it overrides the
+        ``ConsensusConfig``'s): the expected number of wrong placements that would fit as well
+        as the one accepted (:class:`fusionkit.consensus.NullModel`). Smaller is safer and
+        merges less.
     """
 
     method: str = "consensus"
@@ -102,8 +107,12 @@ class MergeConfig:
     reference: int = 0
     seed: int = 0
     consensus: ConsensusConfig | None = None
+    max_false_merge: float = 0.01
 
     def __post_init__(self):
+        v = self.max_false_merge
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < 1.0):
+            raise InputError(f"max_false_merge is a risk in (0, 1) (e.g. 0.01), got {v!r}")
         if self.method not in METHODS:
             raise InputError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
         if not -1.0 <= self.theta <= 1.0:

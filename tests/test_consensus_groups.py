@@ -28,7 +28,7 @@ def two_buildings():
     mit = load_map(REAL / "mit_stata_basement.yaml")
     utexas = load_map(REAL / "utexas_gdc_floor3.yaml")
     one = crop_pair(mit, np.random.default_rng(5), size=240, min_overlap=0.5)
-    two = crop_pair(utexas, np.random.default_rng(5), size=240, min_overlap=0.5)
+    two = crop_pair(utexas, np.random.default_rng(7), size=240, min_overlap=0.5)
     return one, two
 
 

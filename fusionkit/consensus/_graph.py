@@ -33,7 +33,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..transform import Transform2D
-from ._pair import ConsensusConfig, _plausible, displacement
+from ._pair import ConsensusConfig, displacement
 from ._verify import refine_icp, verify
 
 __all__ = ["GraphResult", "solve_graph"]
@@ -119,16 +119,15 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     res = indexes[reference].resolution
     tol = cfg.loop_cells * res
     # weight: the evidence of the placement (agreeing walls net of misfits)
-    edges = {(p.a, p.b): (p.transform, p.confidence, p.best.check.quality())
+    edges = {(p.a, p.b): (p.transform, p.confidence, p.best.rank)
              for p in pairs.values() if p.accepted}
     ambiguous = {(p.a, p.b): p.plausible for p in pairs.values() if p.ambiguous}
-    # witnesses: pairs that pass every threshold but the share of overlapping walls (a good fit
-    # of plenty of wall, on a small part of the larger map); they never place a map, but they
-    # may break ties between loops
-    witness = {(p.a, p.b): (p.transform, p.confidence, p.best.check.quality())
+    # witnesses: pairs whose best placement is meaningful (fewer than one false alarm
+    # expected) without reaching the risk accepted; they never place a map, but they may break
+    # ties between loops
+    witness = {(p.a, p.b): (p.transform, p.confidence, p.best.rank)
                for p in pairs.values()
-               if not p.accepted and not p.ambiguous and p.best is not None
-               and _plausible(p.best.check, cfg, res, 0, p.diagnostics.get("strict", 1.0))}
+               if not p.accepted and not p.ambiguous and p.best is not None and p.nfa <= 1.0}
     dropped: list = []
     resolved: list = []
 
@@ -140,7 +139,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     #    those may be one more alias, so it must be confirmed by a loop before it is used
     repeated: dict = {}
     for (i, j), cands in ambiguous.items():
-        q = max(c.check.quality() for c in cands)
+        q = max(c.rank for c in cands)
         for k in (i, j):
             repeated[k] = max(repeated.get(k, 0.0), q)
     doubtful = {e for e, (_, _, w) in edges.items()
@@ -221,7 +220,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                             closing.add(m)
                 if len(closing) == 1:
                     m = closing.pop()
-                    edges[(i, j)] = (cands[m].transform, cands[m].check.score, cands[m].check.quality())
+                    edges[(i, j)] = (cands[m].transform, cands[m].confidence, cands[m].rank)
                     del ambiguous[(i, j)]
                     witness.pop((i, j), None)
                     resolved.append((i, j))
@@ -389,8 +388,11 @@ def _pose_graph(transforms: list, edges: dict, boxes: list, reference: int, tol:
 
 
 def _disagrees(chk, cfg: ConsensusConfig) -> bool:
-    return chk.overlap >= cfg.min_overlap_cells and (
-        chk.score < cfg.accept - cfg.margin or chk.conflict_fraction > 2 * cfg.max_conflict)
+    """Two placed maps disagree when, where each knows the other's area, their walls miss more
+    than they meet (conflicts on open floor counted thrice, :meth:`Check.evidence`) by more
+    than three times the counting noise of the cells compared."""
+    counted = chk.agreeing + chk.disagreeing
+    return counted > 0 and chk.evidence() < -3.0 * math.sqrt(counted)
 
 
 def _cross_check(a, b, t_ba: Transform2D, cfg: ConsensusConfig, box_b, tol: float):

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -79,6 +80,38 @@ def _groups_from_pairs(n: int, transforms: list, accepted: dict):
     return group, g_t, g_c, trees
 
 
+def _common_confidence(grids, transforms, tree, groups, config):
+    """Each placed map's confidence from the consensus method's test (``exp(-nfa)`` of the link
+    that placed it, 0..1), for a peer whose own score is on a scale of its own."""
+    from . import ConsensusConfig, placement_confidence, prepare_maps
+    cfg = config.consensus if config.consensus is not None else ConsensusConfig()
+    cfg = replace(cfg, max_false_merge=config.max_false_merge, use_scans=False)
+    n = len(grids)
+    group_of, group_tf, group_conf, group_trees = groups
+    links = [(p, q, transforms) for p, q in tree]
+    for g_tree in group_trees:
+        links += [(p, q, group_tf) for p, q in g_tree]
+    if not links:
+        return [1.0 if k == config.reference else 0.0 for k in range(n)], groups
+    needed = sorted({k for p, q, _ in links for k in (p, q)})
+    built = prepare_maps([grids[k] for k in needed], config=cfg)
+    index = dict(zip(needed, built))
+    conf = [0.0] * n
+    conf[config.reference] = 1.0
+    g_conf = list(group_conf)
+    for p, q, frame in links:
+        c = placement_confidence(index[p], index[q], frame[p].inverse @ frame[q], config=cfg,
+                                 seed=config.seed + q)
+        if frame is transforms:
+            conf[q] = c
+        else:
+            g_conf[q] = c
+    for k in range(n):
+        if group_of[k] and group_tf[k] is not None and k == min(m for m in range(n) if group_of[m] == group_of[k]):
+            g_conf[k] = 1.0
+    return conf, (group_of, group_tf, g_conf, group_trees)
+
+
 def _peer(method: str, grids, reference: int, seed: int, emit):
     """Transforms, confidences, tree and reasons of a peer method."""
     import importlib
@@ -128,6 +161,7 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
     if method == CONSENSUS:
         from . import ConsensusConfig, estimate_maps
         cfg = config.consensus if config.consensus is not None else ConsensusConfig()
+        cfg = replace(cfg, max_false_merge=config.max_false_merge)
 
         def cb(stage, step, total, pair):
             label = names[step] if pair is None else f"{names[pair[1]]} -> {names[pair[0]]}"
@@ -155,11 +189,15 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
         seconds.update(res.seconds)
     else:
         transforms, conf, tree, reasons, estimates, groups = _peer(method, grids, ref, config.seed, emit)
+        seconds["align"] = time.perf_counter() - t0
+        # confidence on the one scale of every method: the consensus test of each link placed
+        t1 = time.perf_counter()
+        conf, groups = _common_confidence(grids, transforms, tree, groups, config)
+        seconds["confidence"] = time.perf_counter() - t1
         counts = np.zeros((n, n), int)
         for (i, j), e in estimates.items():
             counts[i, j] = counts[j, i] = int(bool(e.accepted))
             steps.append(MergeStep(i, j, None, e.transform, float(e.confidence), 0, bool(e.accepted), 0))
-        seconds["align"] = time.perf_counter() - t0
     placed_order = [ref]
     for k in [x for edge in tree for x in edge] + list(range(n)):
         if transforms[k] is not None and k not in placed_order:
