@@ -169,6 +169,8 @@ class MapPlacement:
     group: int | None = None
     group_transform: Transform2D | None = None
     group_reference: int | None = None
+    rivals: tuple = ()
+    residual: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -275,6 +277,11 @@ class MergeResult:
             if p.group_transform is not None:
                 entry["group_transform"] = p.group_transform.as_dict()
                 entry["group_reference"] = names[p.group_reference]
+            if p.rivals:
+                entry["rivals"] = [{**t.as_dict(), "confidence": round(float(c), 4)}
+                                   for t, c in p.rivals]
+            if p.residual is not None:
+                entry["residual"] = round(float(p.residual), 4)
             maps.append(entry)
         return {
             "method": self.config.method,

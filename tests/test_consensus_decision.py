@@ -173,3 +173,25 @@ def test_confidence_is_on_one_zero_to_one_scale_for_every_method(intel_crop, met
     for p in result.placements:
         assert 0.0 <= p.confidence <= 1.0
     assert result.placements[1].merged and result.placements[1].confidence > 0.9
+
+
+def test_an_ambiguous_map_lists_its_rival_placements():
+    # two windows of the warehouse whose overlap is all racks (see test_robust)
+    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
+    spec = CaseSpec(0, WorldSpec("warehouse", builtin="warehouse"), "crop", 2, 180735306)
+    case = make_case(spec, BenchConfig())
+    result = merge(list(case.grids), config=MergeConfig(method="consensus"))
+    p = result.placements[1]
+    assert not p.merged and "ambiguous" in p.reason and len(p.rivals) >= 2
+    entry = result.report()["maps"][1]
+    assert {"x", "y", "theta", "confidence"} <= set(entry["rivals"][0])
+    # the true placement is among the rivals
+    truth = case.truth[0].inverse @ case.truth[1]
+    assert min(t.error_to(truth)[0] for t, _ in p.rivals) < 3 * case.grids[0].resolution
+
+
+def test_a_merged_map_reports_how_far_its_walls_stay_from_the_others(intel_crop):
+    result = merge([intel_crop.a, intel_crop.b], config=MergeConfig(method="consensus"))
+    assert result.placements[1].residual is not None
+    assert 0.0 <= result.placements[1].residual <= intel_crop.a.resolution
+    assert "residual" in result.report()["maps"][1]

@@ -68,6 +68,9 @@ class GraphResult:
         Per map of such a group, the confidence of the link that placed it in the group.
     group_trees : tuple of tuple
         Per group 1, 2, ..., its links ``(parent, child)`` in placing order.
+    rivals : tuple of tuple
+        Per map left out as ambiguous, its rival placements ``(transform into the reference's
+        frame, confidence)`` through the placed maps it fits in several places.
     """
 
     transforms: tuple
@@ -80,6 +83,7 @@ class GraphResult:
     group_transforms: tuple = ()
     group_confidences: tuple = ()
     group_trees: tuple = ()
+    rivals: tuple = ()
 
 
 def _edge(edges: dict, i: int, j: int):
@@ -257,6 +261,24 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
             group_conf[k] = c_g[k]
         group_trees.append(tuple(tree_g))
 
+    # the rival placements of a map left out for ambiguity, in the reference's frame (through
+    # each placed map it fits in several places)
+    rivals: list = [() for _ in range(n)]
+    for k in range(n):
+        if transforms[k] is not None:
+            continue
+        found = []
+        for p in pairs.values():
+            if not p.ambiguous or k not in (p.a, p.b):
+                continue
+            other = p.b if k == p.a else p.a
+            if transforms[other] is None:
+                continue
+            for c in p.plausible:
+                t = c.transform if k == p.b else c.transform.inverse     # k -> other
+                found.append((transforms[other] @ t, c.confidence))
+        rivals[k] = tuple(sorted(found, key=lambda tc: -tc[1])[:8])
+
     reasons = []
     for k in range(n):
         if transforms[k] is not None:
@@ -272,7 +294,10 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
             reasons.append("its structure repeats (it fits another map in several places) and no "
                            "loop through a third map confirms its one fit")
         elif any(p.ambiguous for p in mine):
-            reasons.append("ambiguous: several placements fit and no loop through a third map decides")
+            shown = "; ".join(f"({t.x:.2f} m, {t.y:.2f} m, {math.degrees(t.theta):.1f} deg)"
+                              for t, _ in rivals[k][:4])
+            reasons.append("ambiguous: several placements fit and no loop through a third map decides"
+                           + (f"; rival placements in the reference frame: {shown}" if shown else ""))
         elif any(k in e for e in dropped):
             reasons.append("its only confident links disagree with the other maps")
         elif any(p.accepted for p in mine):
@@ -285,7 +310,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     return GraphResult(tuple(transforms), tuple(float(c) for c in conf), tuple(tree),
                        tuple(dropped), tuple(resolved), tuple(reasons), tuple(group),
                        tuple(group_transforms), tuple(float(c) for c in group_conf),
-                       tuple(group_trees))
+                       tuple(group_trees), tuple(rivals))
 
 
 def _place_group(root: int, edges: dict, indexes: list, cfg: ConsensusConfig, boxes: list,

@@ -56,6 +56,19 @@ def _tree_from_pairs(n: int, reference: int, accepted: dict, exclude=frozenset()
         tree.append((p, q))
 
 
+def _residual(a, b, t) -> float | None:
+    """Median distance (m) from B's walls, placed in A by ``t`` (B -> A), to A's nearest wall,
+    over those landing where A is known: how far a bent map's walls stay from the other's."""
+    if len(b.points) == 0:
+        return None
+    ri, ci, inside = a.cells(t(b.points))
+    ri, ci = ri[inside], ci[inside]
+    keep = a.known[ri, ci]
+    if not keep.any():
+        return None
+    return float(np.median(a.dist[ri[keep], ci[keep]])) * a.resolution
+
+
 def _groups_from_pairs(n: int, transforms: list, accepted: dict):
     """Groups of the maps left out that link among themselves over ``accepted``: per map its
     group (0 placed, 1, 2, ... by size, None alone), its transform into its group's first map,
@@ -174,6 +187,11 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
         tree, reasons = list(g.tree), list(g.reasons)
         groups = (list(g.groups), list(g.group_transforms), list(g.group_confidences),
                   list(g.group_trees))
+        rivals = list(g.rivals) if g.rivals else [()] * n
+        residual = [None] * n
+        for a, b in tree:
+            residual[b] = _residual(res.indexes[a], res.indexes[b],
+                                    transforms[a].inverse @ transforms[b])
         for (i, j), p in res.pairs.items():
             ov = p.best.check.overlap if p.best is not None else 0
             steps.append(MergeStep(i, j, None, p.transform, p.confidence, ov,
@@ -189,6 +207,7 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
         seconds.update(res.seconds)
     else:
         transforms, conf, tree, reasons, estimates, groups = _peer(method, grids, ref, config.seed, emit)
+        rivals, residual = [()] * n, [None] * n
         seconds["align"] = time.perf_counter() - t0
         # confidence on the one scale of every method: the consensus test of each link placed
         t1 = time.perf_counter()
@@ -226,6 +245,10 @@ def merge_with(method: str, grids: list, scans: list, names: list, config, emit,
         if g:
             extra.update(group_transform=group_tf[k],
                          group_reference=min(m for m in range(n) if group_of[m] == g))
+        if transforms[k] is None and rivals[k]:
+            extra["rivals"] = rivals[k]
+        if transforms[k] is not None and residual[k] is not None:
+            extra["residual"] = residual[k]
         placements.append(MapPlacement(
             k, names[k], transforms[k] is not None, transforms[k],
             float(conf[k]) if transforms[k] is not None else float(group_conf[k]) if g else 0.0,
