@@ -23,11 +23,11 @@ if not (REAL / "intel_lab.yaml").is_file():
 
 @pytest.fixture(scope="module")
 def two_buildings():
-    """Two overlapping windows of the MIT Stata basement and two of the UT Austin floor (both
+    """Two overlapping windows of the Osnabrueck floor and two of the UT Austin floor (both
     0.05 m cells): the second pair shares no wall with the first."""
-    mit = load_map(REAL / "mit_stata_basement.yaml")
+    uos = load_map(REAL / "uos_avz_floor5.yaml")
     utexas = load_map(REAL / "utexas_gdc_floor3.yaml")
-    one = crop_pair(mit, np.random.default_rng(5), size=240, min_overlap=0.5)
+    one = crop_pair(uos, np.random.default_rng(3), size=240, min_overlap=0.5)
     two = crop_pair(utexas, np.random.default_rng(7), size=240, min_overlap=0.5)
     return one, two
 

@@ -111,7 +111,7 @@ class ConsensusConfig:
 
     max_false_merge: float = 0.01
     null_samples: int = 64
-    calibration: float = 1.5
+    calibration: float = 7.5
     wall_correlation: float = 3.0
     cloud_shift: float = 4.0
     rival: float = 0.6
@@ -406,14 +406,15 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     others.sort(key=lambda c: -c.rank)
     rivals: list[Candidate] = []
     for c in others:
-        # a rival: itself beyond chance, and either nearly as sure (its false alarms at most
-        # 1 / max_false_merge times the best's) or, with at least ``rival`` times the best's
-        # evidence, meeting walls about as often (the shares not significantly apart)
+        # a rival: nearly as sure as the best (its false alarms at most 1 / max_false_merge
+        # times the best's) or, with at least ``rival`` times the best's evidence, meeting
+        # walls about as often (the shares not significantly apart); it need not pass the test
+        # itself: fitting nearly as well elsewhere is enough to make the best unsure
         lg_c = null.log10_nfa(c.check)
         near = (lg_c - log_nfa < -math.log10(eps)
                 or (c.rank >= cfg.rival * best.rank
                     and not null.distinguishable(best.check, c.check, eps)))
-        if lg_c <= math.log10(eps) and near and all(
+        if c.rank > 0 and near and all(
                 displacement(c.transform, r.transform, box) > distinct for r in rivals):
             rivals.append(c)
     plausible = [best] if significant else []
