@@ -104,6 +104,7 @@ def _common_confidence(grids, transforms, tree, groups, config):
     links = [(p, q, transforms) for p, q in tree]
     for g_tree in group_trees:
         links += [(p, q, group_tf) for p, q in g_tree]
+    links = [(p, q, frame) for p, q, frame in links if frame[p] is not None and frame[q] is not None]
     if not links:
         return [1.0 if k == config.reference else 0.0 for k in range(n)], groups
     needed = sorted({k for p, q, _ in links for k in (p, q)})
