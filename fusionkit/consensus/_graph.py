@@ -5,13 +5,13 @@
    those is only used once a loop confirms it (it joins the ambiguous pairs otherwise).
 1. Loops of three accepted pairs are checked: going ``i -> j -> k`` must put map ``k`` where
    ``i -> k`` does. A pair that breaks more loops than it closes is dropped; between pairs that
-   break as many, loops through *witnesses* decide (pairs whose placement passes every
-   threshold but the share of overlapping walls), then the weaker evidence.
+   break as many, loops through *witnesses* decide (pairs whose placement is meaningful, fewer
+   than one false alarm expected, without reaching the risk accepted), then the weaker evidence.
 2. An ambiguous pair (several distinct placements verify) is decided by loops through a third
    map: when exactly one of its placements closes loops with the other two pairs (accepted
    pairs first; then witnesses too), it is taken.
 3. A maximum spanning tree, grown from the reference map, chains the placements; a link's weight
-   is its evidence (agreeing wall cells net of misfits, :meth:`Check.quality`).
+   is its evidence (agreeing wall cells net of misfits, :meth:`Check.evidence`).
 4. Every two placed maps are then checked against each other directly; a pair of placed maps
    that overlaps but disagrees (even after a refinement within the loop tolerance, which
    absorbs the small errors a chain accumulates) reveals a wrong link, and the weakest link of
