@@ -21,6 +21,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Callable, Sequence
 
 from .alignment import AlignmentConfig
@@ -36,7 +37,8 @@ from .resample import canvas_for, resample
 from .scanlog import ScanLog, load_scans, scans_path_for
 from .transform import Transform2D
 
-__all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MergeStep", "MergeResult", "MergeCancelled",
+__all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MapGroup", "MergeStep", "MergeResult",
+           "group_output_paths", "MergeCancelled",
            "merge", "METHODS", "load_inputs"]
 
 
@@ -83,6 +85,11 @@ class MergeConfig:
         Seed of every random step.
     consensus : ConsensusConfig or None
         Settings of the ``"consensus"`` method (None: its defaults).
+    max_false_merge : float
+        The false-merge risk accepted by the ``"consensus"`` method (it overrides the
+        ``ConsensusConfig``'s): the expected number of wrong placements that would fit as well
+        as the one accepted (:class:`fusionkit.methods.consensus.NullModel`). Smaller is safer and
+        merges less.
     """
 
     method: str = "consensus"
@@ -98,8 +105,12 @@ class MergeConfig:
     reference: int = 0
     seed: int = 0
     consensus: ConsensusConfig | None = None
+    max_false_merge: float = 0.01
 
     def __post_init__(self):
+        v = self.max_false_merge
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < 1.0):
+            raise InputError(f"max_false_merge is a risk in (0, 1) (e.g. 0.01), got {v!r}")
         if self.method not in METHODS:
             raise InputError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
         if not -1.0 <= self.theta <= 1.0:
@@ -123,7 +134,10 @@ class MergeConfig:
 @dataclass(frozen=True)
 class MapPlacement:
     """Where one input map went. ``transform`` maps its frame into the merged (reference)
-    frame, None when it was not merged; ``confidence`` is its overlap score in [0, 1]."""
+    frame, None when it was not merged; ``confidence`` says how sure the method is that the
+    placement is right, in [0, 1]. ``group`` is 0 for the reference's group, 1, 2, ... for a
+    group of maps linked among themselves but not to it (None: no group); such a map has its
+    ``group_transform`` into the frame of map ``group_reference`` (its group's first map)."""
 
     index: int
     name: str
@@ -132,6 +146,24 @@ class MapPlacement:
     confidence: float
     overlap_cells: int = 0
     reason: str = ""
+    group: int | None = None
+    group_transform: Transform2D | None = None
+    group_reference: int | None = None
+    rivals: tuple = ()
+    residual: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class MapGroup:
+    """Maps linked among themselves but not to the reference's group: group ``number``
+    (1, 2, ...), its ``members`` (input indices, the first one's frame is the group's),
+    each member's ``transforms`` into that frame (None for the other maps) and their fused
+    ``grid``."""
+
+    number: int
+    members: tuple
+    transforms: tuple
+    grid: OccupancyGrid
 
 
 @dataclass(frozen=True, eq=False)
@@ -165,6 +197,8 @@ class MergeResult:
         Which maps got virtual scans.
     seconds : dict
         Wall time per stage and ``"total"``.
+    groups : tuple of MapGroup
+        Groups of maps left out that link among themselves, largest first.
     """
 
     grid: OccupancyGrid
@@ -180,6 +214,7 @@ class MergeResult:
     virtual: tuple
     config: MergeConfig
     seconds: dict = field(default_factory=dict)
+    groups: tuple = ()
 
     @property
     def transforms(self) -> list:
@@ -191,20 +226,46 @@ class MergeResult:
 
     def report(self, inputs: Sequence[str] | None = None, output: str | None = None) -> dict:
         """The CONTRACTS section 6 report (``inputs`` as given on the command line); a map left
-        out also carries the ``reason`` it was left out."""
+        out also carries the ``reason`` it was left out, a map in a group its ``group`` (and,
+        outside the reference's group, ``group_transform`` and ``group_reference``); the groups'
+        fused maps are listed under ``group_outputs`` (paths from :func:`group_output_paths`,
+        none without ``output``)."""
         names = list(inputs) if inputs is not None else [p.name for p in self.placements]
+        maps = []
+        for p in self.placements:
+            entry = {"input": names[p.index], "merged": p.merged,
+                     "confidence": round(float(p.confidence), 4),
+                     "transform": None if p.transform is None else p.transform.as_dict()}
+            if not p.merged:
+                entry["reason"] = p.reason
+            if p.group is not None:
+                entry["group"] = p.group
+            if p.group_transform is not None:
+                entry["group_transform"] = p.group_transform.as_dict()
+                entry["group_reference"] = names[p.group_reference]
+            if p.rivals:
+                entry["rivals"] = [{**t.as_dict(), "confidence": round(float(c), 4)}
+                                   for t, c in p.rivals]
+            if p.residual is not None:
+                entry["residual"] = round(float(p.residual), 4)
+            maps.append(entry)
         return {
             "method": self.config.method,
             "reference": names[self.config.reference],
             "output": output,
-            "maps": [{"input": names[p.index], "merged": p.merged,
-                      "confidence": round(float(p.confidence), 4),
-                      "transform": None if p.transform is None else p.transform.as_dict(),
-                      **({} if p.merged else {"reason": p.reason})}
-                     for p in self.placements],
+            "maps": maps,
             "fusion_order": [[names[a], names[b]] for a, b in self.fusion_order],
+            "group_outputs": ([str(q) for q in group_output_paths(output, len(self.groups))]
+                              if output is not None else []),
             "seconds": {k: round(v, 3) for k, v in self.seconds.items()},
         }
+
+
+def group_output_paths(output: str | os.PathLike, count: int) -> list[Path]:
+    """``NAME.group1.yaml``, ``NAME.group2.yaml``, ... beside the output ``NAME.yaml``: where
+    the fused maps of ``count`` groups are written (CONTRACTS section 6)."""
+    out = Path(output)
+    return [out.with_name(f"{out.stem}.group{k}{out.suffix}") for k in range(1, count + 1)]
 
 
 def load_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[OccupancyGrid], list[ScanLog | None]]:
@@ -293,13 +354,18 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     emit(MergeEvent("fuse", 0, 1, "fusing"))
     transforms = [p.transform for p in placed.placements]
     fused = fuse_maps(grids, transforms, order=list(placed.order), keep_steps=True)
+    groups = tuple(MapGroup(g.number, g.members, g.transforms,
+                            fuse_maps(grids, list(g.transforms), order=list(g.order)).grid)
+                   for g in placed.groups)
     seconds["fuse"] = time.perf_counter() - t0
     seconds["total"] = time.perf_counter() - t_start
     placements = tuple(
         MapPlacement(k, names[k], p.transform is not None, p.transform, float(p.confidence),
-                     int(p.overlap_cells), "" if p.transform is not None else p.reason)
+                     int(p.overlap_cells), "" if p.transform is not None else p.reason,
+                     group=p.group, group_transform=p.group_transform,
+                     group_reference=p.group_reference, rivals=p.rivals, residual=p.residual)
         for k, p in enumerate(placed.placements))
     emit(MergeEvent("done", 1, 1, "done"))
     return MergeResult(fused.grid, placements, placed.links, placed.order, fused, placed.unique,
                        placed.plan, placed.agreements, placed.steps, placed.scans, placed.virtual,
-                       config, seconds)
+                       config, seconds, groups)

@@ -197,11 +197,11 @@ def test_a_map_from_elsewhere_is_left_out_of_a_chain(five_robots):
     assert [p.merged for p in result.placements] == [True, True, True, False]
 
 
-def _pair(a, b, t, score=0.99, ok=True, plausible=()):
+def _pair(a, b, t, score=0.99, ok=True, plausible=(), nfa=1e-6):
     chk = Check(score, score, score, 500, 1000, 10, 0, 0.0)
-    best = Candidate(t, chk, "walls")
+    best = Candidate(t, chk, "walls", nfa)
     return PairResult(a, b, t, score, ok and not plausible, bool(plausible),
-                      tuple(plausible) or (best,), best)
+                      tuple(plausible) or (best,), best, nfa=nfa)
 
 
 def _boxes(n):
@@ -258,8 +258,8 @@ def test_a_lone_fit_of_a_map_with_repeated_structure_needs_a_loop():
 
 def test_a_witness_decides_which_of_two_clashing_pairs_is_wrong():
     # maps 1, 2, 3 agree among themselves; map 0's fits with 2 and 3 clash, and the wrong one
-    # (0, 3) carries more evidence; the fit (0, 1) has too small an overlap to be accepted, but
-    # as a witness it closes a loop with (0, 2), not with (0, 3)
+    # (0, 3) carries more evidence; the fit (0, 1) is too weak to be accepted (0.5 false alarms
+    # expected), but as a witness it closes a loop with (0, 2), not with (0, 3)
     t01 = Transform2D(1.0, 0.0, 0.3)
     t12 = Transform2D(0.0, 2.0, -0.5)
     t23 = Transform2D(-1.0, 1.0, 0.2)
@@ -267,7 +267,7 @@ def test_a_witness_decides_which_of_two_clashing_pairs_is_wrong():
     wrong = Transform2D(t02.x + 3.0, t02.y, t02.theta) @ t23
     weak = Check(0.99, 0.99, 0.99, 500, 1000, 10, 0, 0.0)
     strong = Check(0.99, 0.99, 0.99, 900, 1800, 10, 0, 0.0)
-    pairs = {(0, 1): _pair(0, 1, t01, ok=False), (1, 2): _pair(1, 2, t12), (2, 3): _pair(2, 3, t23),
+    pairs = {(0, 1): _pair(0, 1, t01, ok=False, nfa=0.5), (1, 2): _pair(1, 2, t12), (2, 3): _pair(2, 3, t23),
              (1, 3): _pair(1, 3, t13), (0, 2): _pair(0, 2, t02),
              (0, 3): _pair(0, 3, wrong)}
     pairs[(0, 3)] = PairResult(0, 3, wrong, 0.99, True, False, (Candidate(wrong, strong, "walls"),),
@@ -334,7 +334,7 @@ def test_every_method_is_reachable_through_merge(crop):
 
 def test_bad_settings_are_refused():
     with pytest.raises(InputError):
-        ConsensusConfig(accept=1.5)
+        ConsensusConfig(max_false_merge=1.5)
     with pytest.raises(InputError):
         ConsensusConfig(rotation_peaks=0)
     with pytest.raises(InputError):

@@ -82,6 +82,11 @@ def add_merge_options(p, method: str | None = None) -> None:
                         f"maps, refused when unsure; spectral-pso: the paper's DFT + Pearson + PSO "
                         f"(the settings below are its own); map-merge, map-merge-shipped, "
                         f"hough-spectrum, fourier-mellin: the classic peers")
+    g.add_argument("--max-false-merge", type=float_range(0, 1, lo_open=True), default=d.max_false_merge,
+                   metavar="RISK",
+                   help=f"consensus: the false-merge risk accepted, the expected number of wrong "
+                        f"placements that would fit as well as one accepted (default "
+                        f"{d.max_false_merge:g}; smaller is safer and merges less)")
     g.add_argument("--seed", type=int, default=d.seed, help=f"seed of every random step (default {d.seed})")
     g.add_argument("--theta", type=float_range(-1, 1), default=d.theta,
                    help=f"Pearson rho above which two unique poses agree (eq. 2; default {d.theta})")
@@ -116,7 +121,7 @@ def merge_config_from_args(args, *, reference: int = 0):
     from ..pipeline import MergeConfig
     cfg = MergeConfig(method=args.method, theta=args.theta, unique_count=args.unique_count,
                       delta=args.delta, sub_sec=args.sub_sec, accept=args.accept,
-                      reference=reference, seed=args.seed)
+                      reference=reference, seed=args.seed, max_false_merge=args.max_false_merge)
     cfg = cfg.with_pso(particles=args.particles, iterations=args.iterations, w=args.w,
                        c1=args.c1, c2=args.c2)
     if args.no_seeding:

@@ -22,7 +22,9 @@ def register(sub) -> None:
                     "them (ROS map_server YAML in, YAML + PGM out). A NAME.scans.npz beside a map is "
                     "used when present; otherwise virtual scans are cast in the map's free space. "
                     "Exit status: 0 all maps merged, 3 some left out (not confidently placed), "
-                    "2 bad input. Report and file formats: docs/formats.md.")
+                    "2 bad input. Maps linked among themselves but not to the reference are "
+                    "fused group by group into MERGED.group1.yaml, ... (listed in the report). "
+                    "Report and file formats: docs/formats.md.")
     p.add_argument("maps", nargs="+", metavar="MAP.yaml", help="robot maps (two or more)")
     p.add_argument("-o", "--output", required=True, metavar="MERGED.yaml",
                    help="where to write the fused map (YAML + PGM beside it)")
@@ -37,7 +39,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..mapio import group_map_files, save_maps
-    from ..pipeline import MergeResult, merge
+    from ..pipeline import MergeResult, group_output_paths, merge
 
     out = Path(args.output)
     if out.suffix not in (".yaml", ".yml"):
@@ -66,14 +68,22 @@ def run(args) -> int:
 
     result: MergeResult = merge(inputs, config=config, callback=callback)
     progress.close()
+    group_paths = group_output_paths(out, len(result.groups))
+    check_not_input(group_paths + [q.with_suffix(".pgm") for q in group_paths],
+                    protected_inputs(inputs))
     report = result.report(inputs, output=str(args.output))
-    # One set: merged map + report (the commit point); group maps of an earlier merge into the
-    # same output that this one does not write are removed with it.
-    save_maps([(result.grid, out)], (report_path, json.dumps(report, indent=2) + "\n"),
-              inputs=inputs, remove=group_map_files(out))
+    # One set: merged map, each group's map and the report (the commit point); group maps of an
+    # earlier merge into the same output that this one does not write are removed with it.
+    new_files = set(group_paths) | {q.with_suffix(".pgm") for q in group_paths}
+    save_maps([(result.grid, out)] + [(g.grid, q) for g, q in zip(result.groups, group_paths)],
+              (report_path, json.dumps(report, indent=2) + "\n"),
+              inputs=inputs, remove=[q for q in group_map_files(out) if q not in new_files])
     if not args.quiet:
         print(format_placements(result, inputs))
         print(f"fused map: {out} ({result.grid.cols}x{result.grid.rows} cells); report: {report_path}")
+        for group, path in zip(result.groups, group_paths):
+            print(f"group {group.number} ({', '.join(str(inputs[k]) for k in group.members)}), "
+                  f"not linked to the reference: {path}")
     return EXIT_ALL_MERGED if result.all_merged else EXIT_SOME_LEFT_OUT
 
 

@@ -23,8 +23,8 @@ from ..pairing import FusionPlan
 from ..pso import PSOState
 from ..transform import Transform2D
 
-__all__ = ["MergeEvent", "MergeStep", "PreparedMaps", "Placement", "MethodResult", "Method",
-           "Emit", "tree_result"]
+__all__ = ["MergeEvent", "MergeStep", "PreparedMaps", "Placement", "PlacedGroup", "MethodResult",
+           "Method", "Emit", "tree_result"]
 
 
 @dataclass(frozen=True)
@@ -80,14 +80,37 @@ class PreparedMaps:
 @dataclass(frozen=True)
 class Placement:
     """Where a method put one map: ``transform`` maps its frame into the reference frame
-    (None: left out, with the ``reason``); ``confidence`` >= 0, the method's own score (1 for
-    the reference; in [0, 1] but for map-merge's inlier ratio); ``overlap_cells`` the
-    overlap the confidence was measured on."""
+    (None: left out, with the ``reason``); ``confidence`` in [0, 1], how sure the method is
+    that the placement is right (1 for the reference; for a map in another group, of its
+    placement in that group); ``overlap_cells`` the overlap it was measured on.
+
+    ``group`` is 0 for the reference's group, 1, 2, ... for a group of maps linked among
+    themselves but not to the reference (None: no group); such a map has its
+    ``group_transform`` into the frame of map ``group_reference``. ``rivals`` lists distinct
+    placements ``(transform, confidence)`` nearly as good as the best (why a map was refused as
+    ambiguous); ``residual`` (m) how far a placed map's walls stay from the other's."""
 
     transform: Transform2D | None
     confidence: float
     reason: str = ""
     overlap_cells: int = 0
+    group: int | None = None
+    group_transform: Transform2D | None = None
+    group_reference: int | None = None
+    rivals: tuple = ()
+    residual: float | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class PlacedGroup:
+    """Maps linked among themselves but not to the reference's group: group ``number`` (1, 2,
+    ...), its ``members`` (input indices; the first one's frame is the group's), each map's
+    ``transforms`` into that frame (None outside the group) and the ``order`` to fuse them in."""
+
+    number: int
+    members: tuple
+    transforms: tuple
+    order: tuple
 
 
 @dataclass(frozen=True, eq=False)
@@ -115,6 +138,8 @@ class MethodResult:
         The paper's method's unique poses and pair agreements (empty for the others).
     seconds : dict
         Wall time per stage.
+    groups : tuple of PlacedGroup
+        Groups of maps left out that link among themselves, largest first.
     """
 
     placements: tuple
@@ -127,6 +152,7 @@ class MethodResult:
     unique: tuple = ()
     agreements: dict = field(default_factory=dict)
     seconds: dict = field(default_factory=dict)
+    groups: tuple = ()
 
 
 class Method(Protocol):
@@ -143,9 +169,14 @@ class Method(Protocol):
 
 def tree_result(maps: PreparedMaps, transforms: list, conf: list, tree: list, reasons: list,
                 overlap: list, counts: np.ndarray, steps: list, scans: tuple, virtual: tuple,
-                seconds: dict) -> MethodResult:
+                seconds: dict, groups=None, rivals=None, residual=None) -> MethodResult:
     """The result of a method that links maps over a tree from the reference: the maps are
-    fused in the order the tree reached them; a map left out has confidence 0."""
+    fused in the order the tree reached them; a map left out has confidence 0 unless it was
+    placed in another group.
+
+    ``groups`` is ``(group_of, group_transforms, group_confidences, group_trees)`` per map
+    (:func:`fusionkit.methods.consensus.group_maps`' shape); ``rivals`` and ``residual`` per map.
+    """
     n = len(maps)
     ref = maps.reference
     placed_order = [ref]
@@ -153,8 +184,30 @@ def tree_result(maps: PreparedMaps, transforms: list, conf: list, tree: list, re
         if transforms[k] is not None and k not in placed_order:
             placed_order.append(k)
     plan = FusionPlan(counts, tuple(tree), tuple(k for k in range(n) if transforms[k] is None))
-    placements = tuple(Placement(transforms[k], float(conf[k]) if transforms[k] is not None else 0.0,
-                                 reasons[k] if transforms[k] is None else "", int(overlap[k]))
-                       for k in range(n))
-    return MethodResult(placements, tuple(tree), tuple(placed_order), plan, tuple(steps), scans,
-                        virtual, seconds=seconds)
+    if groups is None:
+        groups = ([0 if t is not None else None for t in transforms], [None] * n, [0.0] * n, [])
+    group_of, group_tf, group_conf, group_trees = groups
+    rivals = rivals if rivals is not None else [()] * n
+    residual = residual if residual is not None else [None] * n
+    placed_groups = []
+    for number, g_tree in enumerate(group_trees, start=1):
+        members = tuple(k for k in range(n) if group_of[k] == number)
+        order = (members[0],) + tuple(q for _, q in g_tree if q != members[0])
+        tf = tuple(group_tf[k] if group_of[k] == number else None for k in range(n))
+        placed_groups.append(PlacedGroup(number, members, tf, order))
+    placements = []
+    for k in range(n):
+        g = group_of[k]
+        in_group = bool(g) and group_tf[k] is not None
+        if transforms[k] is not None:
+            c = float(conf[k])
+        else:
+            c = float(group_conf[k]) if in_group else 0.0
+        placements.append(Placement(
+            transforms[k], c, reasons[k] if transforms[k] is None else "", int(overlap[k]),
+            group=g, group_transform=group_tf[k] if in_group else None,
+            group_reference=(min(m for m in range(n) if group_of[m] == g) if in_group else None),
+            rivals=tuple(rivals[k]) if transforms[k] is None and rivals[k] else (),
+            residual=residual[k] if transforms[k] is not None else None))
+    return MethodResult(tuple(placements), tuple(tree), tuple(placed_order), plan, tuple(steps),
+                        scans, virtual, seconds=seconds, groups=tuple(placed_groups))

@@ -15,9 +15,12 @@ For every pair of maps, candidate placements come from two independent sources:
 Each candidate is refined on the full maps' walls (ICP on the distance field, optionally the
 paper's PSO of eq. 3 in a small box) and verified both ways (:func:`verify`): the fraction of
 each map's walls, where the other map is known, that lie within one cell of the other's walls,
-and the walls drawn on the other's clear free space. A pair is accepted when its best placement
-passes the thresholds and no distinct placement comes close; when several fit (repetitive
-buildings), loops through third maps decide. The placements are chained over a maximum
+and the walls drawn on the other's clear free space. The decision does not rest on thresholds in
+metres, cells or percent: the best placement's evidence is judged against the evidence the same
+two maps reach at many wrong placements (a null distribution drawn from the maps themselves,
+:class:`NullModel`), and accepted when its number of false alarms is at most the risk the user
+accepts (``max_false_merge``) and no distinct placement comes close; when several fit
+(repetitive buildings), loops through third maps decide. The placements are chained over a maximum
 spanning tree by confidence and every two placed maps are cross-checked (:mod:`._graph`).
 """
 
@@ -41,11 +44,11 @@ from ._graph import GraphResult, solve_graph
 from ._index import MapIndex, index_map
 from ._pair import Candidate, ConsensusConfig, PairResult, corners, estimate_indexed
 from ._search import evidence_raster, orientation_histogram
-from ._verify import Check, refine_icp, refine_pso, verify
+from ._verify import Check, NullModel, null_model, refine_icp, refine_pso, verify
 
 __all__ = ["ConsensusConfig", "Check", "Candidate", "PairResult", "GraphResult", "MapsResult",
            "MapIndex", "prepare_maps", "estimate_pair", "estimate_maps", "verify", "refine_icp",
-           "refine_pso", "METHOD"]
+           "refine_pso", "NullModel", "null_model", "placement_confidence", "METHOD"]
 
 METHOD = "consensus"
 
@@ -90,10 +93,9 @@ def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None
     Returns
     -------
     fusionkit.methods.peers.PairEstimate
-        ``transform`` maps b's frame into a's (m, rad), ``confidence`` is the verification
-        score (0..1), ``accepted`` whether it passed; ``candidates`` lists every distinct
-        placement that passed the thresholds; ``diagnostics["pair"]`` is the
-        :class:`PairResult`.
+        ``transform`` maps b's frame into a's (m, rad), ``confidence`` is ``exp(-nfa)`` of
+        the test (0..1), ``accepted`` whether it passed; ``candidates`` lists every distinct
+        placement that passed it; ``diagnostics["pair"]`` is the :class:`PairResult`.
     """
     from ..peers import PairEstimate
     t0 = time.perf_counter()
@@ -102,9 +104,28 @@ def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None
                           hist_b=orientation_histogram(ib),
                           evidence_a=evidence_raster(ia, coarse=config.coarse, max_side=config.coarse_side), seed=seed)
     return PairEstimate(pr.transform, pr.confidence, pr.accepted,
-                        tuple((c.transform, c.check.score) for c in pr.plausible) or
+                        tuple((c.transform, c.confidence) for c in pr.plausible) or
                         (((pr.transform, pr.confidence),) if pr.transform is not None else ()),
                         METHOD, time.perf_counter() - t0, {"pair": pr, "reason": pr.reason})
+
+
+def placement_confidence(a: MapIndex, b: MapIndex, t, *, config: ConsensusConfig = ConsensusConfig(),
+                         seed: int = 0) -> float:
+    """The confidence (0..1, ``exp(-nfa)``) the consensus test gives a placement ``t`` (B -> A)
+    found by any method: the same scale for every method's report."""
+    import math
+
+    import numpy as np
+    if len(a.points) == 0 or len(b.points) == 0 or t is None:
+        return 0.0
+    box = corners(b)
+    null, _ = null_model(a, b, t, box, samples=config.null_samples,
+                         distinct=config.distinct_cells * a.resolution,
+                         points=b.refine_points[:: max(1, len(b.refine_points) // config.coarse_points)],
+                         calibration=config.calibration, correlation=config.wall_correlation,
+                         seed=np.random.default_rng(seed))
+    nfa = null.nfa(verify(a, b, t))
+    return math.exp(-nfa) if math.isfinite(nfa) else 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -5,13 +5,13 @@
    those is only used once a loop confirms it (it joins the ambiguous pairs otherwise).
 1. Loops of three accepted pairs are checked: going ``i -> j -> k`` must put map ``k`` where
    ``i -> k`` does. A pair that breaks more loops than it closes is dropped; between pairs that
-   break as many, loops through *witnesses* decide (pairs whose placement passes every
-   threshold but the share of overlapping walls), then the weaker evidence.
+   break as many, loops through *witnesses* decide (pairs whose placement is meaningful, fewer
+   than one false alarm expected, without reaching the risk accepted), then the weaker evidence.
 2. An ambiguous pair (several distinct placements verify) is decided by loops through a third
    map: when exactly one of its placements closes loops with the other two pairs (accepted
    pairs first; then witnesses too), it is taken.
 3. A maximum spanning tree, grown from the reference map, chains the placements; a link's weight
-   is its evidence (agreeing wall cells net of misfits, :meth:`Check.quality`).
+   is its evidence (agreeing wall cells net of misfits, :meth:`Check.evidence`).
 4. Every two placed maps are then checked against each other directly; a pair of placed maps
    that overlaps but disagrees (even after a refinement within the loop tolerance, which
    absorbs the small errors a chain accumulates) reveals a wrong link, and the weakest link of
@@ -19,6 +19,8 @@
    places them).
 5. Optionally (``pose_graph``, on by default) the placements are adjusted by least squares over
    every accepted link consistent with them, so that loops share out the links' small errors.
+6. Maps left out that link among themselves form groups, each placed by steps 3-5 in the frame
+   of its first map; they are not merged into the reference's map but kept, group by group.
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ...transform import Transform2D
-from ._pair import ConsensusConfig, _plausible, displacement
+from ._pair import ConsensusConfig, displacement
 from ._verify import refine_icp, verify
 
 __all__ = ["GraphResult", "solve_graph"]
@@ -55,6 +57,20 @@ class GraphResult:
         Ambiguous pairs decided by a loop through a third map.
     reasons : tuple of str
         Per map, why it was left out (empty when placed).
+    groups : tuple of (int or None)
+        Per map, its group: 0 for the reference's (the placed maps), 1, 2, ... for groups of
+        maps linked among themselves but not to the reference's (largest first), None for a
+        map linked to no other.
+    group_transforms : tuple of (Transform2D or None)
+        Per map of a group other than 0, its frame -> the frame of its group's first map (the
+        lowest index); None otherwise.
+    group_confidences : tuple of float
+        Per map of such a group, the confidence of the link that placed it in the group.
+    group_trees : tuple of tuple
+        Per group 1, 2, ..., its links ``(parent, child)`` in placing order.
+    rivals : tuple of tuple
+        Per map left out as ambiguous, its rival placements ``(transform into the reference's
+        frame, confidence)`` through the placed maps it fits in several places.
     """
 
     transforms: tuple
@@ -63,6 +79,11 @@ class GraphResult:
     dropped: tuple
     resolved: tuple
     reasons: tuple
+    groups: tuple = ()
+    group_transforms: tuple = ()
+    group_confidences: tuple = ()
+    group_trees: tuple = ()
+    rivals: tuple = ()
 
 
 def _edge(edges: dict, i: int, j: int):
@@ -102,16 +123,15 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     res = indexes[reference].resolution
     tol = cfg.loop_cells * res
     # weight: the evidence of the placement (agreeing walls net of misfits)
-    edges = {(p.a, p.b): (p.transform, p.confidence, p.best.check.quality())
+    edges = {(p.a, p.b): (p.transform, p.confidence, p.best.rank)
              for p in pairs.values() if p.accepted}
     ambiguous = {(p.a, p.b): p.plausible for p in pairs.values() if p.ambiguous}
-    # witnesses: pairs that pass every threshold but the share of overlapping walls (a good fit
-    # of plenty of wall, on a small part of the larger map); they never place a map, but they
-    # may break ties between loops
-    witness = {(p.a, p.b): (p.transform, p.confidence, p.best.check.quality())
+    # witnesses: pairs whose best placement is meaningful (fewer than one false alarm
+    # expected) without reaching the risk accepted; they never place a map, but they may break
+    # ties between loops
+    witness = {(p.a, p.b): (p.transform, p.confidence, p.best.rank)
                for p in pairs.values()
-               if not p.accepted and not p.ambiguous and p.best is not None
-               and _plausible(p.best.check, cfg, res, 0, p.diagnostics.get("strict", 1.0))}
+               if not p.accepted and not p.ambiguous and p.best is not None and p.nfa <= 1.0}
     dropped: list = []
     resolved: list = []
 
@@ -123,7 +143,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     #    those may be one more alias, so it must be confirmed by a loop before it is used
     repeated: dict = {}
     for (i, j), cands in ambiguous.items():
-        q = max(c.check.quality() for c in cands)
+        q = max(c.rank for c in cands)
         for k in (i, j):
             repeated[k] = max(repeated.get(k, 0.0), q)
     doubtful = {e for e, (_, _, w) in edges.items()
@@ -204,25 +224,117 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                             closing.add(m)
                 if len(closing) == 1:
                     m = closing.pop()
-                    edges[(i, j)] = (cands[m].transform, cands[m].check.score, cands[m].check.quality())
+                    edges[(i, j)] = (cands[m].transform, cands[m].confidence, cands[m].rank)
                     del ambiguous[(i, j)]
                     witness.pop((i, j), None)
                     resolved.append((i, j))
                     changed = True
 
     # 3. maximum spanning tree from the reference, then 4. cross checks of the placed maps
+    transforms, conf, tree = _place_group(reference, edges, indexes, cfg, boxes, tol, dropped)
+    if cfg.pose_graph:
+        transforms = _pose_graph(transforms, edges, boxes, reference, tol)
+
+    # 6. maps that link among themselves but not to the reference's group form groups of their
+    #    own, each placed the same way in the frame of its first map (lowest input index)
+    found = []
+    remaining = [k for k in range(n) if transforms[k] is None]
+    while remaining:
+        root = remaining[0]
+        t_g, c_g, tree_g = _place_group(root, edges, indexes, cfg, boxes, tol, dropped,
+                                        exclude={k for k in range(n) if transforms[k] is not None})
+        members = [k for k in range(n) if t_g[k] is not None]
+        remaining = [k for k in remaining if k not in members]
+        if len(members) >= 2:
+            if cfg.pose_graph:
+                t_g = _pose_graph(t_g, edges, boxes, root, tol)
+            found.append((members, t_g, c_g, tree_g))
+    found.sort(key=lambda g: (-len(g[0]), g[0][0]))
+    group = [0 if transforms[k] is not None else None for k in range(n)]
+    group_transforms: list = [None] * n
+    group_conf = [0.0] * n
+    group_trees = []
+    for number, (members, t_g, c_g, tree_g) in enumerate(found, start=1):
+        for k in members:
+            group[k] = number
+            group_transforms[k] = t_g[k]
+            group_conf[k] = c_g[k]
+        group_trees.append(tuple(tree_g))
+
+    # the rival placements of a map left out for ambiguity, in the reference's frame (through
+    # each placed map it fits in several places)
+    rivals: list = [() for _ in range(n)]
+    for k in range(n):
+        if transforms[k] is not None:
+            continue
+        found = []
+        for p in pairs.values():
+            if not p.ambiguous or k not in (p.a, p.b):
+                continue
+            other = p.b if k == p.a else p.a
+            if transforms[other] is None:
+                continue
+            for c in p.plausible:
+                t = c.transform if k == p.b else c.transform.inverse     # k -> other
+                found.append((transforms[other] @ t, c.confidence))
+        rivals[k] = tuple(sorted(found, key=lambda tc: -tc[1])[:8])
+
+    reasons = []
+    for k in range(n):
+        if transforms[k] is not None:
+            reasons.append("")
+            continue
+        mine = [p for p in pairs.values() if k in (p.a, p.b)]
+        if group[k] is not None:
+            root = min(m for m in range(n) if group[m] == group[k])
+            reasons.append(f"placed in group {group[k]} with {len([m for m in range(n) if group[m] == group[k]]) - 1} "
+                           f"other map(s) (frame of map {root + 1}); no confident link joins that "
+                           "group to the reference's")
+        elif any(k in e for e in demoted if e not in edges):
+            reasons.append("its structure repeats (it fits another map in several places) and no "
+                           "loop through a third map confirms its one fit")
+        elif any(p.ambiguous for p in mine):
+            shown = "; ".join(f"({t.x:.2f} m, {t.y:.2f} m, {math.degrees(t.theta):.1f} deg)"
+                              for t, _ in rivals[k][:4])
+            reasons.append("ambiguous: several placements fit and no loop through a third map decides"
+                           + (f"; rival placements in the reference frame: {shown}" if shown else ""))
+        elif any(k in e for e in dropped):
+            reasons.append("its only confident links disagree with the other maps")
+        elif any(p.accepted for p in mine):
+            reasons.append("its confident links reach other maps but none of them links to the "
+                           "reference map")
+        else:
+            best = max(mine, key=lambda p: p.confidence, default=None)
+            reasons.append(best.reason if best is not None and best.reason else
+                           "no confident placement against any other map")
+    return GraphResult(tuple(transforms), tuple(float(c) for c in conf), tuple(tree),
+                       tuple(dropped), tuple(resolved), tuple(reasons), tuple(group),
+                       tuple(group_transforms), tuple(float(c) for c in group_conf),
+                       tuple(group_trees), tuple(rivals))
+
+
+def _place_group(root: int, edges: dict, indexes: list, cfg: ConsensusConfig, boxes: list,
+                 tol: float, dropped: list, exclude=frozenset()):
+    """Maximum spanning tree of the accepted links grown from ``root`` (maps in ``exclude``
+    are never reached), then every two maps it placed checked against each other; a pair
+    that disagrees cuts the weakest link of the tree path between them (removed from
+    ``edges``, added to ``dropped``) and the tree is grown again.
+
+    Returns the transforms into ``root``'s frame (None for maps not reached), the confidences
+    of the links that placed them and the tree ``(parent, child)`` in placing order."""
+    n = len(indexes)
     while True:
         transforms = [None] * n
         conf = [0.0] * n
         parent = [-1] * n
-        transforms[reference] = Transform2D.identity()
-        conf[reference] = 1.0
+        transforms[root] = Transform2D.identity()
+        conf[root] = 1.0
         tree = []
         while True:
             best = None
             for (i, j), (t, c, w) in edges.items():
                 for p, q in ((i, j), (j, i)):
-                    if transforms[p] is not None and transforms[q] is None:
+                    if transforms[p] is not None and transforms[q] is None and q not in exclude:
                         if best is None or w > best[0]:
                             best = (w, p, q)
             if best is None:
@@ -249,36 +361,10 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                 path = _tree_path(parent, a, b)
                 cut = min(path, key=lambda e: _edge(edges, *e)[2])
         if cut is None:
-            break
+            return transforms, conf, tree
         key = cut if cut in edges else (cut[1], cut[0])
         dropped.append(key)
         del edges[key]
-
-    if cfg.pose_graph:
-        transforms = _pose_graph(transforms, edges, boxes, reference, tol)
-
-    reasons = []
-    for k in range(n):
-        if transforms[k] is not None:
-            reasons.append("")
-            continue
-        mine = [p for p in pairs.values() if k in (p.a, p.b)]
-        if any(k in e for e in demoted if e not in edges):
-            reasons.append("its structure repeats (it fits another map in several places) and no "
-                           "loop through a third map confirms its one fit")
-        elif any(p.ambiguous for p in mine):
-            reasons.append("ambiguous: several placements fit and no loop through a third map decides")
-        elif any(k in e for e in dropped):
-            reasons.append("its only confident links disagree with the other maps")
-        elif any(p.accepted for p in mine):
-            reasons.append("its confident links reach other maps but none of them links to the "
-                           "reference map")
-        else:
-            best = max(mine, key=lambda p: p.confidence, default=None)
-            reasons.append(best.reason if best is not None and best.reason else
-                           "no confident placement against any other map")
-    return GraphResult(tuple(transforms), tuple(float(c) for c in conf), tuple(tree),
-                       tuple(dropped), tuple(resolved), tuple(reasons))
 
 
 def _pose_graph(transforms: list, edges: dict, boxes: list, reference: int, tol: float) -> list:
@@ -327,8 +413,11 @@ def _pose_graph(transforms: list, edges: dict, boxes: list, reference: int, tol:
 
 
 def _disagrees(chk, cfg: ConsensusConfig) -> bool:
-    return chk.overlap >= cfg.min_overlap_cells and (
-        chk.score < cfg.accept - cfg.margin or chk.conflict_fraction > 2 * cfg.max_conflict)
+    """Two placed maps disagree when, where each knows the other's area, their walls miss more
+    than they meet (conflicts on open floor counted thrice, :meth:`Check.evidence`) by more
+    than three times the counting noise of the cells compared."""
+    counted = chk.agreeing + chk.disagreeing
+    return counted > 0 and chk.evidence() < -3.0 * math.sqrt(counted)
 
 
 def _cross_check(a, b, t_ba: Transform2D, cfg: ConsensusConfig, box_b, tol: float):

@@ -8,7 +8,7 @@ maps over its maximum spanning tree, and the result lists every pair it tried.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,6 +36,7 @@ class ConsensusMethod:
 
     def settings(self, config) -> ConsensusSettings:
         cfg = config.consensus if config.consensus is not None else ConsensusConfig()
+        cfg = replace(cfg, max_false_merge=config.max_false_merge)
         return ConsensusSettings(cfg, config.virtual_poses, config.seed)
 
     def place(self, maps: PreparedMaps, settings: ConsensusSettings, emit):
@@ -57,6 +58,13 @@ class ConsensusMethod:
         g = res.graph
         transforms, conf = list(g.transforms), list(g.confidences)
         tree, reasons = list(g.tree), list(g.reasons)
+        groups = (list(g.groups), list(g.group_transforms), list(g.group_confidences),
+                  list(g.group_trees))
+        rivals = list(g.rivals) if g.rivals else [()] * n
+        residual = [None] * n
+        for a, b in tree:
+            residual[b] = _residual(res.indexes[a], res.indexes[b],
+                                    transforms[a].inverse @ transforms[b])
         for (i, j), p in res.pairs.items():
             ov = p.best.check.overlap if p.best is not None else 0
             steps.append(MergeStep(i, j, None, p.transform, p.confidence, ov,
@@ -71,4 +79,17 @@ class ConsensusMethod:
         logs = tuple(ix.log for ix in res.indexes)
         seconds.update(res.seconds)
         return tree_result(maps, transforms, conf, tree, reasons, overlap, counts, steps, logs,
-                           virtual, seconds)
+                           virtual, seconds, groups=groups, rivals=rivals, residual=residual)
+
+
+def _residual(a, b, t) -> float | None:
+    """Median distance (m) from B's walls, placed in A by ``t`` (B -> A), to A's nearest wall,
+    over those landing where A is known: how far a bent map's walls stay from the other's."""
+    if len(b.points) == 0:
+        return None
+    ri, ci, inside = a.cells(t(b.points))
+    ri, ci = ri[inside], ci[inside]
+    keep = a.known[ri, ci]
+    if not keep.any():
+        return None
+    return float(np.median(a.dist[ri[keep], ci[keep]])) * a.resolution

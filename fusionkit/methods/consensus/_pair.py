@@ -15,7 +15,8 @@ from ...transform import Transform2D
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, rotation_candidates
-from ._verify import DEFAULT_GATES, Check, refine_cloud, refine_icp, refine_pso, verify
+from ._verify import (DEFAULT_GATES, Check, NullModel, null_model, refine_cloud, refine_icp,
+                      refine_pso, verify)
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
 
@@ -26,28 +27,31 @@ class ConsensusConfig:
 
     Attributes
     ----------
-    accept : float
-        Least verification score (:class:`~fusionkit.methods.consensus.Check`, 0..1) for a placement.
-    min_overlap_cells : int
-        Least number of wall cells of each map that must land where the other map is known.
-    min_overlap_fraction : float
-        ... and at least this fraction of the smaller map's wall cells.
-    min_agreement : float
-        Least evidence (:meth:`Check.quality` times the cell size, in metres of wall) for a
-        placement: a perfect fit of a small patch of wall is not enough to merge.
-    min_agreement_cells : int
-        Least evidence in cells: on coarse grids a few metres of wall are too few cells to pin a
-        placement down to a cell or two (not required of placements refined on recorded scans).
+    max_false_merge : float
+        The false-merge risk accepted, the one number the decision turns on: a placement is
+        accepted when the number of false alarms of its evidence (the expected count of wrong
+        placements, among all a search can end on, that would fit as well; judged against the
+        evidence the same two maps reach at many wrong placements, :class:`NullModel`) is at
+        most this, and no distinct placement is nearly as good: one that a wrong placement would
+        exceed the best from with probability above this. Its meaning does not depend on the
+        maps' cell size, extent or clutter.
+    null_samples : int
+        Wrong placements sampled (ICP from random starts) for the null distribution.
+    calibration : float
+        Decades added to the model's count of false alarms (:class:`NullModel`): on pairs of
+        crops of two different buildings the model is optimistic; this is chosen there, by
+        leave-one-world-out (BENCHMARKS.md).
+    wall_correlation : float
+        Length of wall (m) along which cells agree or not together: the prior of the null
+        model's design effect, which the measured one is shrunk towards (:func:`null_model`).
     cloud_shift : float
         Largest move (cells) the refinement on recorded scans may make to a placement.
-    max_conflict : float
-        Largest fraction of wall cells allowed on the other map's clear free space.
     rival : float
-        A second, distinct placement whose score is at least ``accept - margin`` and whose
-        quality (:meth:`Check.quality`) is at least ``rival`` times the best one's makes the
-        pair ambiguous: it is then only merged when a loop through a third map decides.
-    margin : float
-        Slack (score) of the rival test and of the cross checks between placed maps.
+        A distinct placement with at least this fraction of the best one's evidence
+        (:meth:`Check.evidence`) whose share of meeting walls is not significantly lower is a
+        rival. In the graph stage, a map that fits a third map in several places about equally
+        well has repeated structure, so its single fit elsewhere whose evidence is less than
+        ``1 / rival`` times those must be confirmed by a loop.
     distinct_cells : float
         Two placements are distinct when some corner of the moving map's known area moves by
         more than this many cells between them.
@@ -90,10 +94,8 @@ class ConsensusConfig:
         When a map is left out, search its pairs again exhaustively: every ``fallback_step``
         degrees of rotation, three times as many candidates refined.
     fallback_step : float
-        Rotation step (degrees) of that search.
-    fallback_strictness : float
-        Factor on ``min_overlap_cells``, ``min_agreement`` and ``min_agreement_cells`` for
-        placements found by it.
+        Rotation step (degrees) of that search (its placements are judged by the same test: the
+        number of placements it could end on does not depend on how many starts it tries).
     loop_cells : float
         Largest disagreement (cells, at the moving map's corners) of a loop of three
         placements for it to count as consistent.
@@ -107,15 +109,12 @@ class ConsensusConfig:
         default: the pairs of most cases are too quick for threads to pay (BENCHMARKS.md).
     """
 
-    accept: float = 0.9
-    min_overlap_cells: int = 100
-    min_overlap_fraction: float = 0.15
-    min_agreement: float = 20.0
-    min_agreement_cells: int = 300
+    max_false_merge: float = 0.01
+    null_samples: int = 64
+    calibration: float = 7.5
+    wall_correlation: float = 3.0
     cloud_shift: float = 4.0
-    max_conflict: float = 0.05
     rival: float = 0.6
-    margin: float = 0.04
     distinct_cells: float = 6.0
     rotation_peaks: int = 4
     translations: int = 3
@@ -134,33 +133,30 @@ class ConsensusConfig:
     pso_top: int = 4
     fallback: bool = True
     fallback_step: float = 2.0
-    fallback_strictness: float = 1.5
     loop_cells: float = 8.0
     final_check: bool = True
     pose_graph: bool = True
     threads: int = 1
 
     def __post_init__(self):
-        if not 0.0 < self.accept <= 1.0:
-            raise InputError(f"accept is a verification score in (0, 1], got {self.accept}")
-        if not (0.0 <= self.max_conflict <= 1.0 and 0.0 <= self.margin <= 1.0 and 0.0 < self.rival <= 1.0):
-            raise InputError("max_conflict and margin are fractions in [0, 1], rival in (0, 1]")
-        for name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters", "rotation_peaks",
-                     "translations", "refine_top", "max_poses", "max_refine_points", "coarse_points",
-                     "pso_top", "alias_peaks", "coarse_side", "threads"):
+        v = self.max_false_merge
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < 1.0):
+            raise InputError(f"max_false_merge is a risk in (0, 1) (e.g. 0.01), got {v!r}")
+        if not (isinstance(self.calibration, (int, float)) and math.isfinite(self.calibration)
+                and self.calibration >= 0):
+            raise InputError(f"calibration is a number of decades >= 0, got {self.calibration!r}")
+        if not 0.0 < self.rival <= 1.0:
+            raise InputError(f"rival is a fraction in (0, 1], got {self.rival}")
+        for name in ("scan_clusters", "rotation_peaks", "translations", "refine_top", "max_poses",
+                     "max_refine_points", "coarse_points", "pso_top", "alias_peaks", "coarse_side",
+                     "threads", "null_samples"):
             v = getattr(self, name)
-            least = 0 if name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters",
-                                  "alias_peaks", "threads") else 1
+            least = 0 if name in ("scan_clusters", "alias_peaks", "threads") else (
+                8 if name == "null_samples" else 1)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
                 raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
-        if not 0.0 <= self.min_overlap_fraction <= 1.0:
-            raise InputError(f"min_overlap_fraction is a fraction in [0, 1], got {self.min_overlap_fraction}")
-        if not (math.isfinite(self.fallback_strictness) and self.fallback_strictness >= 1):
-            raise InputError(f"fallback_strictness must be >= 1, got {self.fallback_strictness}")
-        if not (math.isfinite(self.min_agreement) and self.min_agreement >= 0):
-            raise InputError(f"min_agreement must be >= 0 m, got {self.min_agreement}")
         for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells", "fallback_step",
-                     "cloud_shift"):
+                     "cloud_shift", "wall_correlation"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a positive number, got {v!r}")
@@ -174,11 +170,18 @@ class Candidate:
     transform: Transform2D
     check: Check
     source: str
+    nfa: float = math.inf
 
     @property
     def rank(self) -> float:
-        """Ordering key: :meth:`Check.quality`."""
-        return self.check.quality()
+        """Ordering key: :meth:`Check.evidence`."""
+        return self.check.evidence()
+
+    @property
+    def confidence(self) -> float:
+        """``exp(-nfa)``: the probability, under the pair's null distribution, that no wrong
+        placement fits as well (0..1)."""
+        return math.exp(-self.nfa) if math.isfinite(self.nfa) else 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,13 +195,14 @@ class PairResult:
     transform : Transform2D or None
         The best verified placement (None when no candidate came out at all).
     confidence : float
-        Its verification score (0..1).
+        ``exp(-nfa)`` (0..1): how sure the test is that the placement is right.
     accepted : bool
-        Whether it passes the thresholds and has no close rival.
+        Whether its number of false alarms is at most ``max_false_merge`` and no distinct
+        placement is nearly as good.
     ambiguous : bool
-        Whether it passes the thresholds but a distinct rival does too.
+        Whether it passes the test but a distinct rival is nearly as good.
     plausible : tuple of Candidate
-        Every distinct candidate that passes the thresholds, best first; for an ambiguous pair
+        Every distinct candidate that passes the test, best first; for an ambiguous pair
         the best one, its rivals and those.
     best : Candidate or None
     refined : tuple of Candidate
@@ -226,6 +230,8 @@ class PairResult:
     reason: str = ""
     seconds: float = 0.0
     diagnostics: dict = field(default_factory=dict)
+    nfa: float = math.inf
+    null: NullModel | None = None
 
 
 def corners(index: MapIndex) -> np.ndarray:
@@ -257,13 +263,6 @@ def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
     return math.sqrt(worst)
 
 
-def _plausible(chk: Check, cfg: ConsensusConfig, resolution: float, walls: int,
-               strict: float = 1.0, cells: bool = True) -> bool:
-    return (chk.score >= cfg.accept and chk.overlap >= strict * cfg.min_overlap_cells
-            and chk.overlap >= cfg.min_overlap_fraction * walls
-            and chk.quality() * resolution >= strict * cfg.min_agreement
-            and (not cells or chk.quality() >= strict * cfg.min_agreement_cells)
-            and chk.conflict_fraction <= cfg.max_conflict)
 
 
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
@@ -273,14 +272,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
 
     With ``exhaustive``, the translation search also runs at every ``fallback_step`` degrees
     of rotation (for maps whose walls have no dominant directions, such as caves), and three
-    times as many candidates are refined. Testing more hypotheses gives chance fits more
-    opportunities, so the overlap and agreement a placement needs are then
-    ``fallback_strictness`` times higher. When both maps come with recorded scans, the best
-    placement is finally refined on the scans' end points (``tree_a``: a ``cKDTree`` of
-    ``a.cloud``, built when not given); such a placement is not held to
-    ``min_agreement_cells``, which guards against the coarseness of grids.
+    times as many candidates are refined. When both maps come with recorded scans, the best
+    placement is refined on the scans' end points (``tree_a``: a ``cKDTree`` of ``a.cloud``,
+    built when not given). The best placement is then judged against the null distribution of
+    the pair (:class:`~fusionkit.methods.consensus.NullModel`) and against every distinct placement
+    found.
     """
-    strict = cfg.fallback_strictness if exhaustive else 1.0
     t0 = time.perf_counter()
     if len(a.points) == 0 or len(b.points) == 0:
         empty = [k + 1 for k, ix in ((ia, a), (ib, b)) if len(ix.points) == 0]
@@ -339,12 +336,11 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     for start, source in starts:
         refine(start, source)
     refined.sort(key=lambda c: -c.rank)
-    if refined and cfg.alias_peaks and _plausible(refined[0].check, cfg, res,
-                                                  min(len(a.points), len(b.points)), strict):
+    if refined and cfg.alias_peaks and refined[0].rank > 0:
         # repeated structure (racks, rooms along a corridor) fits B in several places at the
         # same rotation; the rotation search keeps only a few translations per rotation, so
         # look for such aliases of the best placement in its own correlation surface: each one
-        # found that verifies nearly as well makes the pair ambiguous instead of wrongly sure
+        # found that fits nearly as well makes the pair ambiguous instead of wrongly sure
         best_t = refined[0].transform
         for start, _ in corr.translations(best_t.theta, count=cfg.alias_peaks,
                                           suppress=2 * cfg.distinct_cells * res):
@@ -355,81 +351,99 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         return PairResult(ia, ib, None, 0.0, False, False, reason="no candidate placement found",
                           seconds=seconds, hypotheses=n_hyp)
     best = refined[0]
+    distinct = cfg.distinct_cells * res
+    rng = np.random.default_rng([seed, ia, ib])
 
-    def contender(c: Candidate) -> bool:
-        """Whether ``c`` fits nearly as well as the current best placement."""
-        return c.rank >= cfg.rival * best.rank and c.check.score >= cfg.accept - cfg.margin
+    def close(c: Candidate) -> bool:
+        """Whether ``c``, a distinct placement, fits nearly as well as the best one (a crude
+        pre-test; the null distribution decides below)."""
+        return c.rank >= 0.5 * best.rank and displacement(c.transform, best.transform, box) > distinct
 
-    if cfg.pso_refine and any(contender(c) for c in refined[1:cfg.pso_top]):
+    if cfg.pso_refine and best.rank > 0 and any(close(c) for c in refined[1:cfg.pso_top]):
         # polish the best placement and every contender that could rival it alike, so that
         # the rival test compares like with like (a placement without contenders is already
         # as precise as the walls allow after ICP)
         if "soft" not in a.cache:
             a.cache["soft"] = make_field(a.points, res, sigma=1.0)
         soft = a.cache["soft"]
-        rng = np.random.default_rng(seed)
         for k, c in enumerate(refined[:cfg.pso_top]):
-            if k and not contender(c):
+            if k and not close(c):
                 continue
             t = refine_pso(a.points, b.refine_points, c.transform, res, seed=rng, field=soft)
             t = refine_icp(a, b.refine_points, t, gates=(3.0, 2.0))
             chk = verify(a, b, t)
-            if chk.quality() > c.rank:
+            if chk.evidence() > c.rank:
                 refined[k] = Candidate(t, chk, c.source)
         refined.sort(key=lambda c: -c.rank)
         best = refined[0]
-    scan_refined = False
     if cfg.use_scans and len(a.cloud) and len(b.cloud):
         # recorded scans do not quantise walls to cells: pin the best placement down on them
         tree = tree_a if tree_a is not None else cKDTree(a.cloud)
         t = refine_cloud(a.cloud, tree, b.cloud, best.transform)
         if displacement(t, best.transform, box) <= cfg.cloud_shift * res:
             chk = verify(a, b, t)
-            if chk.quality() >= 0.9 * best.rank:
+            if chk.evidence() >= 0.9 * best.rank:
                 best = Candidate(t, chk, best.source)
                 refined[0] = best
-                scan_refined = True
-    walls = min(len(a.points), len(b.points))
-    plausible = []
-    for c in refined:
-        if _plausible(c.check, cfg, res, walls, strict) and all(
-                displacement(c.transform, p.transform, box) > cfg.distinct_cells * res for p in plausible):
-            plausible.append(c)
-    ok = _plausible(best.check, cfg, res, walls, strict, cells=not scan_refined)
-    # a rival need not pass every threshold itself: fitting nearly as well elsewhere is enough
-    # to make the best placement unsure
-    rivals = []
-    for c in refined[1:]:
-        if contender(c) and displacement(c.transform, best.transform, box) > cfg.distinct_cells * res:
+
+    # the test: the best placement's evidence against the evidence of wrong placements of the
+    # same two maps (a contrario: its number of false alarms), then against every distinct
+    # placement found (by the search or among the wrong placements sampled)
+    null, wrong = null_model(a, b, best.transform, box, samples=cfg.null_samples,
+                             distinct=distinct, points=thin, calibration=cfg.calibration,
+                             correlation=cfg.wall_correlation, seed=rng)
+    eps = cfg.max_false_merge
+
+    def judged(c: Candidate) -> Candidate:
+        return Candidate(c.transform, c.check, c.source, null.nfa(c.check))
+
+    refined = [judged(c) for c in refined]
+    best = refined[0]
+    log_nfa = null.log10_nfa(best.check)
+    significant = log_nfa <= math.log10(eps)
+    others = [c for c in refined[1:] if displacement(c.transform, best.transform, box) > distinct]
+    others += [Candidate(t, chk, "null", null.nfa(chk)) for t, chk in wrong]
+    others.sort(key=lambda c: -c.rank)
+    rivals: list[Candidate] = []
+    for c in others:
+        # a rival: nearly as sure as the best (its false alarms at most 1 / max_false_merge
+        # times the best's) or, with at least ``rival`` times the best's evidence, meeting
+        # walls about as often (the shares not significantly apart); it need not pass the test
+        # itself: fitting nearly as well elsewhere is enough to make the best unsure
+        lg_c = null.log10_nfa(c.check)
+        near = (lg_c - log_nfa < -math.log10(eps)
+                or (c.rank >= cfg.rival * best.rank
+                    and not null.distinguishable(best.check, c.check, eps)))
+        if c.rank > 0 and near and all(
+                displacement(c.transform, r.transform, box) > distinct for r in rivals):
             rivals.append(c)
-    accepted = ok and not rivals
-    if ok and rivals:
-        # the placements a loop through a third map may choose from
-        options = [best] + rivals
-        options += [c for c in plausible if all(displacement(c.transform, o.transform, box)
-                                                > cfg.distinct_cells * res for o in options)]
-        plausible = options
-    chk = best.check
+    plausible = [best] if significant else []
+    for c in others:
+        if c.nfa <= eps and all(displacement(c.transform, p.transform, box) > distinct
+                                for p in plausible + rivals):
+            plausible.append(c)
+    accepted = significant and not rivals
+    if significant and rivals:
+        plausible = [best] + rivals + plausible[1:]
+    nfa = best.nfa
+    confidence = best.confidence
     if accepted:
         reason = ""
-    elif ok:
-        reason = (f"ambiguous: {len(rivals) + 1} distinct placements agree on "
-                  f"{100 * min(r.check.score for r in rivals):.0f}-{100 * chk.score:.0f}% of the walls")
-    elif chk.overlap < max(strict * cfg.min_overlap_cells, cfg.min_overlap_fraction * walls):
-        reason = (f"best placement overlaps only {chk.overlap} wall cells (needs "
-                  f"{math.ceil(max(strict * cfg.min_overlap_cells, cfg.min_overlap_fraction * walls))})")
-    elif (chk.quality() * res < strict * cfg.min_agreement
-          or (not scan_refined and chk.quality() < strict * cfg.min_agreement_cells)):
-        reason = (f"best placement agrees on too few walls ({chk.quality() * res:.1f} m, "
-                  f"{chk.quality():.0f} cells net of misfits; needs {strict * cfg.min_agreement:g} m "
-                  f"and {strict * cfg.min_agreement_cells:.0f} cells)")
-    elif chk.score < cfg.accept:
-        reason = (f"best placement agrees on {100 * chk.score:.0f}% of the overlapping walls "
-                  f"(needs {100 * cfg.accept:.0f}%)")
+    elif significant:
+        reason = (f"ambiguous: {len(rivals) + 1} distinct placements fit about as well "
+                  f"({100 * min(r.check.score for r in rivals):.0f}-{100 * best.check.score:.0f}% "
+                  "of the walls meet) and the maps alone cannot tell them apart")
+    elif not null.usable:
+        reason = ("nothing to judge a placement by: too few walls overlap at any placement to tell "
+                  "a right one from a wrong one")
     else:
-        reason = (f"best placement puts {100 * chk.conflict_fraction:.1f}% of the walls on open "
-                  f"floor (allows {100 * cfg.max_conflict:.1f}%)")
-    return PairResult(ia, ib, best.transform, float(chk.score), bool(accepted), bool(ok and rivals),
-                      tuple(plausible), best, tuple(refined), len(starts), n_hyp, reason,
-                      time.perf_counter() - t0,
-                      {"rotations": len(rots), "check": chk.as_dict(), "strict": strict})
+        reason = (f"best placement is not distinguishable from chance: "
+                  f"{100 * best.check.score:.0f}% of the walls meet where wrong placements of these "
+                  f"maps reach {100 * null.p0:.0f}%, too few walls for that to be sure "
+                  f"(expected false alarms 10^{log_nfa:.1f}, allowed {eps:g})")
+    return PairResult(ia, ib, best.transform, float(confidence), bool(accepted),
+                      bool(significant and rivals), tuple(plausible), best, tuple(refined),
+                      len(starts), n_hyp, reason, time.perf_counter() - t0,
+                      {"rotations": len(rots), "check": best.check.as_dict(),
+                       "log10_nfa": log_nfa, "null_p0": null.p0, "null_design": null.design,
+                       "tests": null.tests, "rivals": len(rivals)}, nfa, null)

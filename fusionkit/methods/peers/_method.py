@@ -14,7 +14,7 @@ from __future__ import annotations
 import importlib
 import itertools
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -34,14 +34,18 @@ PEERS = {
 
 @dataclass(frozen=True)
 class PeerSettings:
-    """A peer's settings: the seed of its random steps."""
+    """A peer's settings: the seed of its random steps, and what the common confidence test
+    (the consensus method's, :func:`_common_confidence`) needs: its settings and the risk."""
 
     seed: int = 0
+    consensus: object = None
+    max_false_merge: float = 0.01
 
 
-def _tree_from_pairs(n: int, reference: int, accepted: dict):
+def _tree_from_pairs(n: int, reference: int, accepted: dict, exclude=frozenset()):
     """Maximum spanning tree by confidence grown from ``reference`` over ``accepted``
-    (``(i, j) -> (transform j -> i, confidence)``); returns transforms, confidences, tree."""
+    (``(i, j) -> (transform j -> i, confidence)``), never reaching the maps in ``exclude``;
+    returns transforms, confidences, tree."""
     transforms = [None] * n
     conf = [0.0] * n
     transforms[reference] = Transform2D.identity()
@@ -51,7 +55,8 @@ def _tree_from_pairs(n: int, reference: int, accepted: dict):
         best = None
         for (i, j), (t, c) in accepted.items():
             for p, q, t_qp in ((i, j, t), (j, i, t.inverse)):
-                if transforms[p] is not None and transforms[q] is None and (best is None or c > best[0]):
+                if (transforms[p] is not None and transforms[q] is None and q not in exclude
+                        and (best is None or c > best[0])):
                     best = (c, p, q, t_qp)
         if best is None:
             return transforms, conf, tree
@@ -59,6 +64,63 @@ def _tree_from_pairs(n: int, reference: int, accepted: dict):
         transforms[q] = transforms[p] @ t_qp
         conf[q] = c
         tree.append((p, q))
+
+
+def _groups_from_pairs(n: int, transforms: list, accepted: dict):
+    """Groups of the maps left out that link among themselves over ``accepted``: per map its
+    group (0 placed, 1, 2, ... by size, None alone), its transform into its group's first map,
+    its confidence there; and each group's tree."""
+    found = []
+    remaining = [k for k in range(n) if transforms[k] is None]
+    placed = {k for k in range(n) if transforms[k] is not None}
+    while remaining:
+        root = remaining[0]
+        t_g, c_g, tree_g = _tree_from_pairs(n, root, accepted, exclude=placed)
+        members = [k for k in range(n) if t_g[k] is not None]
+        remaining = [k for k in remaining if k not in members]
+        if len(members) >= 2:
+            found.append((members, t_g, c_g, tree_g))
+    found.sort(key=lambda g: (-len(g[0]), g[0][0]))
+    group = [0 if transforms[k] is not None else None for k in range(n)]
+    g_t, g_c, trees = [None] * n, [0.0] * n, []
+    for number, (members, t_g, c_g, tree_g) in enumerate(found, start=1):
+        for k in members:
+            group[k], g_t[k], g_c[k] = number, t_g[k], c_g[k]
+        trees.append(tuple(tree_g))
+    return group, g_t, g_c, trees
+
+
+def _common_confidence(grids, transforms, tree, groups, reference: int, settings: PeerSettings):
+    """Each placed map's confidence from the consensus method's test (``exp(-nfa)`` of the link
+    that placed it, 0..1), for a peer whose own score is on a scale of its own."""
+    from ..consensus import ConsensusConfig, placement_confidence, prepare_maps
+    cfg = settings.consensus if settings.consensus is not None else ConsensusConfig()
+    cfg = replace(cfg, max_false_merge=settings.max_false_merge, use_scans=False)
+    n = len(grids)
+    group_of, group_tf, group_conf, group_trees = groups
+    links = [(p, q, transforms) for p, q in tree]
+    for g_tree in group_trees:
+        links += [(p, q, group_tf) for p, q in g_tree]
+    links = [(p, q, frame) for p, q, frame in links if frame[p] is not None and frame[q] is not None]
+    if not links:
+        return [1.0 if k == reference else 0.0 for k in range(n)], groups
+    needed = sorted({k for p, q, _ in links for k in (p, q)})
+    built = prepare_maps([grids[k] for k in needed], config=cfg)
+    index = dict(zip(needed, built))
+    conf = [0.0] * n
+    conf[reference] = 1.0
+    g_conf = list(group_conf)
+    for p, q, frame in links:
+        c = placement_confidence(index[p], index[q], frame[p].inverse @ frame[q], config=cfg,
+                                 seed=settings.seed + q)
+        if frame is transforms:
+            conf[q] = c
+        else:
+            g_conf[q] = c
+    for k in range(n):
+        if group_of[k] and group_tf[k] is not None and k == min(m for m in range(n) if group_of[m] == group_of[k]):
+            g_conf[k] = 1.0
+    return conf, (group_of, group_tf, g_conf, group_trees)
 
 
 def _peer(method: str, grids, reference: int, seed: int, emit):
@@ -75,7 +137,8 @@ def _peer(method: str, grids, reference: int, seed: int, emit):
         tree = list(est.tree)
         reasons = ["" if transforms[k] is not None else
                    "not in the largest group of confidently matched maps" for k in range(n)]
-        return transforms, conf, tree, reasons, {}
+        groups = ([0 if t is not None else None for t in transforms], [None] * n, [0.0] * n, [])
+        return transforms, conf, tree, reasons, {}, groups
     accepted = {}
     todo = list(itertools.combinations(range(n), 2))
     estimates = {}
@@ -86,9 +149,10 @@ def _peer(method: str, grids, reference: int, seed: int, emit):
         if e.accepted and e.transform is not None:
             accepted[(i, j)] = (e.transform, float(e.confidence))
     transforms, conf, tree = _tree_from_pairs(n, reference, accepted)
+    groups = _groups_from_pairs(n, transforms, accepted)
     reasons = ["" if transforms[k] is not None else
                f"{method} accepted no pair linking it to the reference" for k in range(n)]
-    return transforms, conf, tree, reasons, estimates
+    return transforms, conf, tree, reasons, estimates, groups
 
 
 class PeerMethod:
@@ -100,19 +164,24 @@ class PeerMethod:
         self.name = name
 
     def settings(self, config) -> PeerSettings:
-        return PeerSettings(config.seed)
+        return PeerSettings(config.seed, config.consensus, config.max_false_merge)
 
     def place(self, maps: PreparedMaps, settings: PeerSettings, emit):
         """Run the peer on the maps and list the pairs it tried as steps."""
         t0 = time.perf_counter()
         n = len(maps)
-        transforms, conf, tree, reasons, estimates = _peer(self.name, list(maps.grids), maps.reference,
-                                                           settings.seed, emit)
+        grids = list(maps.grids)
+        transforms, conf, tree, reasons, estimates, groups = _peer(self.name, grids, maps.reference,
+                                                                   settings.seed, emit)
         counts = np.zeros((n, n), int)
         steps = []
         for (i, j), e in estimates.items():
             counts[i, j] = counts[j, i] = int(bool(e.accepted))
             steps.append(MergeStep(i, j, None, e.transform, float(e.confidence), 0, bool(e.accepted), 0))
         seconds = {"align": time.perf_counter() - t0}
+        # confidence on the one scale of every method: the consensus test of each link placed
+        t1 = time.perf_counter()
+        conf, groups = _common_confidence(grids, transforms, tree, groups, maps.reference, settings)
+        seconds["confidence"] = time.perf_counter() - t1
         return tree_result(maps, transforms, conf, tree, reasons, [0] * n, counts, steps,
-                           tuple(maps.scans), tuple(False for _ in range(n)), seconds)
+                           tuple(maps.scans), tuple(False for _ in range(n)), seconds, groups=groups)

@@ -1,0 +1,131 @@
+"""Leave-one-world-out choice of the consensus test's one calibrated constant, and its
+out-of-sample result.
+
+    python benchmarks/calibrate_consensus.py [--maps DIR] [--pairs 36] [--seed 1] [--out FILE]
+                                             [--from FILE]
+
+Pairs are drawn from the real maps of ``--maps`` (default ../shared/maps/real; maps at 0.05 m
+cells, so that two of them can be paired without resampling): *positives* are two overlapping
+windows of one map (160-320 cells square, at least 30 % shared, the second turned and moved,
+:func:`fusionkit.methods.peers.crop_pair`), *negatives* a window of one map and a window of another
+building, where every placement is wrong. The consensus method estimates each pair
+(:func:`fusionkit.methods.consensus.estimate_pair`, default settings) and the inputs of its test are
+recorded.
+
+The constant is ``ConsensusConfig.calibration``: decades added to the null model's count of
+false alarms. For each world in turn it is chosen on the pairs of all the other worlds (the
+least offset, in quarter decades, at which none of their negatives reaches ``max_false_merge``
+= 0.01, plus a quarter decade) and measured on the pairs of the world left out: positives placed
+right (passing the test, not ambiguous, at the truth), positives placed wrong, negatives passing
+the test. Whether a pair is ambiguous is read from the run at the default offset, as the rival
+test is not run again at each offset (a pair not passing the test there is never flagged
+ambiguous, so the negatives' column counts the test alone). A negative belongs to both of its
+worlds and is judged once with each left out. Prints the per-world table and the totals.
+``--from`` re-reads recorded pairs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parents[1]
+EPS = 0.01
+
+
+def draw_pairs(maps_dir: Path, count: int, seed: int) -> list[dict]:
+    from fusionkit.methods.peers import crop_pair, placement_error
+    from fusionkit.methods.consensus import ConsensusConfig, estimate_pair
+    from fusionkit.errors import FusionkitError
+    from fusionkit.mapio import load_map
+    cfg = ConsensusConfig()
+    maps = {}
+    for y in sorted(maps_dir.glob("*.yaml")):
+        g = load_map(y)
+        if abs(g.resolution - 0.05) < 1e-9 and min(g.rows, g.cols) > 330 and g.occupied_mask().sum() > 2000:
+            maps[y.stem] = g
+    names = sorted(maps)
+    rng = np.random.default_rng(seed)
+    rows = []
+    for kind in ("pos", "neg"):
+        for it in range(count):
+            n1 = names[it % len(names)]
+            try:
+                c = crop_pair(maps[n1], rng, size=int(rng.integers(160, 320)), min_overlap=0.3)
+                if kind == "neg":
+                    n2 = names[(names.index(n1) + 1 + int(rng.integers(len(names) - 1))) % len(names)]
+                    c2 = crop_pair(maps[n2], rng, size=int(rng.integers(160, 320)), min_overlap=0.3)
+            except FusionkitError:
+                continue
+            a, b = c.a, (c.b if kind == "pos" else c2.b)
+            pr = estimate_pair(a, b, config=cfg).diagnostics["pair"]
+            if pr.best is None or pr.null is None:
+                continue
+            right = None
+            if kind == "pos":
+                d, r = placement_error(pr.best.transform, c.truth, b)
+                right = bool(d < 3 * a.resolution and r < math.radians(2))
+            rows.append({"kind": kind, "world": n1, "other": n2 if kind == "neg" else None,
+                         "right": right, "ambiguous": bool(pr.ambiguous),
+                         "log10_nfa_model": pr.diagnostics["log10_nfa"] - cfg.calibration,
+                         "score": pr.best.check.score})
+            print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
+def merged(row: dict, offset: float) -> bool:
+    return row["log10_nfa_model"] + offset <= math.log10(EPS) and not row["ambiguous"]
+
+
+def leave_one_world_out(rows: list[dict]) -> None:
+    grid = np.arange(0.0, 12.01, 0.25)
+    worlds = sorted({r["world"] for r in rows} | {r["other"] for r in rows if r["other"]})
+    total = {"positives": 0, "right": 0, "wrong": 0, "negatives": 0, "negatives passing": 0}
+    print("| world left out | offset chosen | positives placed right | placed wrong | negatives passing |")
+    print("|---|---|---|---|---|")
+    for w in worlds:
+        train = [r for r in rows if r["kind"] == "neg" and w not in (r["world"], r["other"])]
+        offset = next(c for c in grid if all(r["log10_nfa_model"] + c > math.log10(EPS)
+                                             for r in train)) + 0.25
+        pos = [r for r in rows if r["kind"] == "pos" and r["world"] == w]
+        neg = [r for r in rows if r["kind"] == "neg" and w in (r["world"], r["other"])]
+        right = sum(merged(r, offset) and r["right"] for r in pos)
+        wrong = sum(merged(r, offset) and not r["right"] for r in pos)
+        nm = sum(merged(r, offset) for r in neg)
+        total["positives"] += len(pos)
+        total["right"] += right
+        total["wrong"] += wrong
+        total["negatives"] += len(neg)
+        total["negatives passing"] += nm
+        print(f"| {w} | {offset:.2f} | {right}/{len(pos)} | {wrong} | {nm}/{len(neg)} |")
+    print()
+    print("out of sample (each world judged with the offset chosen without it):", total)
+    allw = next(c for c in grid if all(r["log10_nfa_model"] + c > math.log10(EPS)
+                                       for r in rows if r["kind"] == "neg")) + 0.25
+    print(f"offset chosen on every world: {allw:.2f}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--maps", default=str(HERE.parent / "shared" / "maps" / "real"))
+    ap.add_argument("--pairs", type=int, default=36, help="positives and negatives each")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--out", default=None, help="record the pairs (JSON) here")
+    ap.add_argument("--from", dest="source", default=None, help="re-read recorded pairs")
+    args = ap.parse_args(argv)
+    if args.source:
+        rows = json.loads(Path(args.source).read_text())
+    else:
+        rows = draw_pairs(Path(args.maps), args.pairs, args.seed)
+        if args.out:
+            Path(args.out).write_text(json.dumps(rows, indent=1))
+    leave_one_world_out(rows)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,197 @@
+"""The consensus decision on constructed cases: a test against the maps' own wrong placements,
+one risk number, refusals with their reasons."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit.methods.peers import crop_pair, placement_error
+from fusionkit.cli import main
+from fusionkit.methods.consensus import ConsensusConfig, estimate_pair
+from fusionkit.errors import InputError
+from fusionkit.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from fusionkit.mapio import load_map, save_map
+from fusionkit.pipeline import MergeConfig, merge
+from fusionkit.transform import Transform2D
+
+REPO = Path(__file__).resolve().parents[1]
+REAL = REPO / "maps" / "real"
+if not (REAL / "intel_lab.yaml").is_file():
+    REAL = REPO.parent / "shared" / "maps" / "real"
+
+
+def right(t, crop, cells=3.0) -> bool:
+    d, r = placement_error(t, crop.truth, crop.b)
+    return d < cells * crop.a.resolution and r < math.radians(2.0)
+
+
+@pytest.fixture(scope="module")
+def intel_crop():
+    return crop_pair(load_map(REAL / "intel_lab.yaml"), np.random.default_rng(3), size=200,
+                     min_overlap=0.4)
+
+
+def _clutter(grid: OccupancyGrid, rng, moved=0.1, blobs=25) -> OccupancyGrid:
+    """A second session of the same place: a tenth of the walls one cell off, and furniture,
+    people and doors (small occupied blobs) on the free floor."""
+    data = grid.trinary().copy()
+    r, c = np.nonzero(data == OCCUPIED)
+    pick = rng.choice(r.size, size=int(moved * r.size), replace=False)
+    nr = np.clip(r[pick] + rng.integers(-1, 2, pick.size), 0, data.shape[0] - 1)
+    nc = np.clip(c[pick] + rng.integers(-1, 2, pick.size), 0, data.shape[1] - 1)
+    data[r[pick], c[pick]] = FREE
+    data[nr, nc] = OCCUPIED
+    fr, fc = np.nonzero(data == FREE)
+    for k in rng.choice(fr.size, size=blobs, replace=False):
+        data[fr[k]:fr[k] + 3, fc[k]:fc[k] + 3] = OCCUPIED
+    return OccupancyGrid(data, grid.resolution, grid.origin)
+
+
+def test_a_true_placement_on_a_cluttered_pair_is_accepted(intel_crop):
+    cluttered = _clutter(intel_crop.b, np.random.default_rng(1))
+    est = estimate_pair(intel_crop.a, cluttered)
+    pair = est.diagnostics["pair"]
+    assert pair.best.check.score < 0.95            # the two sessions really disagree somewhere
+    assert est.accepted, pair.reason
+    assert right(est.transform, intel_crop)
+    assert 0.99 <= est.confidence <= 1.0
+
+
+def _rooms(n_rooms: int, resolution: float = 0.05) -> OccupancyGrid:
+    """A corridor along a row of identical rooms (4 m wide, doors alike), all of it seen."""
+    room, corridor, wall = 4.0, 2.0, 0.1
+    w, h = n_rooms * room, room + corridor
+    cols, rows = int(round(w / resolution)) + 2, int(round(h / resolution)) + 2
+    data = np.full((rows, cols), FREE, np.int8)
+    t = max(1, int(round(wall / resolution)))
+    data[:t, :] = data[-t:, :] = OCCUPIED
+    data[:, :t] = data[:, -t:] = OCCUPIED
+    split = int(round(room / resolution))
+    data[split:split + t, :] = OCCUPIED                      # the corridor's wall
+    door = int(round(1.0 / resolution))
+    per = int(round(room / resolution))
+    for k in range(n_rooms):
+        x0 = k * per
+        data[split:split + t, x0 + per // 2 - door // 2: x0 + per // 2 + door // 2] = FREE
+        if k:
+            data[:split, x0:x0 + t] = OCCUPIED                # walls between rooms
+    return OccupancyGrid(data, resolution, (0.0, 0.0, 0.0))
+
+
+def _window(world: OccupancyGrid, x0: float, x1: float, t: Transform2D) -> OccupancyGrid:
+    """The part of ``world`` between x0 and x1 (m), unknown elsewhere; its origin moved by
+    ``t`` (so the true transform of this map into the world's frame is ``t.inverse``)."""
+    data = np.full(world.trinary().shape, UNKNOWN, np.int8)
+    c0, c1 = int(round(x0 / world.resolution)), int(round(x1 / world.resolution))
+    data[:, c0:c1] = world.trinary()[:, c0:c1]
+    moved = t @ Transform2D(*world.origin)
+    return OccupancyGrid(data, world.resolution, (moved.x, moved.y, moved.theta))
+
+
+def test_a_one_period_alias_on_identical_rooms_is_refused_or_resolved():
+    world = _rooms(8)
+    # A sees rooms 1-3, B rooms 2-4: their overlap (rooms 2-3) is alike one room further on
+    a = _window(world, 4.0, 16.0, Transform2D.identity())
+    b = _window(world, 8.0, 20.0, Transform2D.identity())
+    est = estimate_pair(a, b)
+    if est.accepted:                                  # placed: then only at the truth
+        assert est.transform.error_to(Transform2D.identity())[0] < 0.15
+    else:
+        assert est.diagnostics["pair"].reason
+    # a third map reaching the end of the row, where the rooms stop repeating, may decide; any
+    # placement made must be the true one
+    c = _window(world, 0.0, 10.0, Transform2D.identity())
+    result = merge([a, b, c], config=MergeConfig(method="consensus"))
+    for p in result.placements:
+        if p.merged:
+            assert p.transform.error_to(Transform2D.identity())[0] < 0.15, p.name
+        else:
+            assert p.reason
+
+
+def _finer(g: OccupancyGrid) -> OccupancyGrid:
+    """The same map at half the cell size (every cell split in four)."""
+    data = np.repeat(np.repeat(g.trinary(), 2, axis=0), 2, axis=1)
+    return OccupancyGrid(data, g.resolution / 2, g.origin)
+
+
+def test_the_same_pair_at_two_resolutions_gets_the_same_decision(intel_crop):
+    coarse = estimate_pair(intel_crop.a, intel_crop.b)
+    fine = estimate_pair(_finer(intel_crop.a), _finer(intel_crop.b))
+    assert coarse.accepted and fine.accepted
+    assert fine.transform.error_to(coarse.transform)[0] < 2 * intel_crop.a.resolution
+    # and a pair that does not overlap is refused at both
+    data = load_map(REAL / "intel_lab.yaml")
+    far = data.cell_to_world(379.5, 379.5)
+    a = OccupancyGrid(data.trinary()[:200, :200], data.resolution, data.origin)
+    b = OccupancyGrid(data.trinary()[380:580, 380:580], data.resolution, (float(far[0]), float(far[1]), 0.0))
+    assert not estimate_pair(a, b).accepted
+    assert not estimate_pair(_finer(a), _finer(b)).accepted
+
+
+@pytest.mark.parametrize("kind", ["no walls", "all unknown", "1x1"])
+def test_a_map_no_test_can_judge_is_refused_with_its_reason(intel_crop, kind):
+    if kind == "no walls":
+        data = np.where(intel_crop.b.trinary() == OCCUPIED, FREE, intel_crop.b.trinary())
+        g = OccupancyGrid(data.astype(np.int8), intel_crop.b.resolution, intel_crop.b.origin)
+    elif kind == "all unknown":
+        g = OccupancyGrid(np.full((50, 50), UNKNOWN, np.int8), intel_crop.b.resolution, (0.0, 0.0, 0.0))
+    else:
+        g = OccupancyGrid(np.full((1, 1), OCCUPIED, np.int8), intel_crop.b.resolution, (0.0, 0.0, 0.0))
+    result = merge([intel_crop.a, g], config=MergeConfig(method="consensus"))
+    p = result.placements[1]
+    assert not p.merged and p.transform is None and p.confidence == 0.0
+    assert p.reason
+
+
+def test_a_smaller_risk_never_merges_more(intel_crop):
+    loose = estimate_pair(intel_crop.a, intel_crop.b, config=ConsensusConfig(max_false_merge=0.2))
+    strict = estimate_pair(intel_crop.a, intel_crop.b, config=ConsensusConfig(max_false_merge=1e-300))
+    assert loose.accepted and not strict.accepted
+    assert "chance" in strict.diagnostics["pair"].reason
+
+
+def test_the_risk_is_one_user_number_checked_on_the_command_line(intel_crop, tmp_path, capsys):
+    save_map(intel_crop.a, tmp_path / "a.yaml")
+    save_map(intel_crop.b, tmp_path / "b.yaml")
+    args = ["merge", str(tmp_path / "a.yaml"), str(tmp_path / "b.yaml"), "-o", str(tmp_path / "m.yaml")]
+    with pytest.raises(SystemExit) as exc:
+        main(args + ["--max-false-merge", "0", "--quiet"])
+    assert exc.value.code == 2 and "max-false-merge" in capsys.readouterr().err
+    assert main(args + ["--max-false-merge", "0.001", "--quiet"]) == 0
+    with pytest.raises(InputError):
+        MergeConfig(max_false_merge=1.0)
+
+
+@pytest.mark.parametrize("method", ["map-merge", "fourier-mellin", "consensus"])
+def test_confidence_is_on_one_zero_to_one_scale_for_every_method(intel_crop, method):
+    result = merge([intel_crop.a, intel_crop.b], config=MergeConfig(method=method))
+    for p in result.placements:
+        assert 0.0 <= p.confidence <= 1.0
+    assert result.placements[1].merged and result.placements[1].confidence > 0.9
+
+
+def test_an_ambiguous_map_lists_its_rival_placements():
+    # two windows of the warehouse whose overlap is all racks (see test_robust)
+    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
+    spec = CaseSpec(0, WorldSpec("warehouse", builtin="warehouse"), "crop", 2, 180735306)
+    case = make_case(spec, BenchConfig())
+    result = merge(list(case.grids), config=MergeConfig(method="consensus"))
+    p = result.placements[1]
+    assert not p.merged and "ambiguous" in p.reason and len(p.rivals) >= 2
+    entry = result.report()["maps"][1]
+    assert {"x", "y", "theta", "confidence"} <= set(entry["rivals"][0])
+    # the true placement is among the rivals
+    truth = case.truth[0].inverse @ case.truth[1]
+    assert min(t.error_to(truth)[0] for t, _ in p.rivals) < 3 * case.grids[0].resolution
+
+
+def test_a_merged_map_reports_how_far_its_walls_stay_from_the_others(intel_crop):
+    result = merge([intel_crop.a, intel_crop.b], config=MergeConfig(method="consensus"))
+    assert result.placements[1].residual is not None
+    assert 0.0 <= result.placements[1].residual <= intel_crop.a.resolution
+    assert "residual" in result.report()["maps"][1]

@@ -1,0 +1,79 @@
+"""Groups: maps that link among themselves but not to the reference are kept, group by group
+(CONTRACTS section 6)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit.methods.peers import crop_pair, placement_error
+from fusionkit.cli import main
+from fusionkit.mapio import load_map, save_map
+from fusionkit.pipeline import MergeConfig, merge
+
+REPO = Path(__file__).resolve().parents[1]
+REAL = REPO / "maps" / "real"
+if not (REAL / "intel_lab.yaml").is_file():
+    REAL = REPO.parent / "shared" / "maps" / "real"
+
+
+@pytest.fixture(scope="module")
+def two_buildings():
+    """Two overlapping windows of the Osnabrueck floor and two of the UT Austin floor (both
+    0.05 m cells): the second pair shares no wall with the first."""
+    uos = load_map(REAL / "uos_avz_floor5.yaml")
+    utexas = load_map(REAL / "utexas_gdc_floor3.yaml")
+    one = crop_pair(uos, np.random.default_rng(3), size=240, min_overlap=0.5)
+    two = crop_pair(utexas, np.random.default_rng(7), size=240, min_overlap=0.5)
+    return one, two
+
+
+def test_a_group_not_linked_to_the_reference_is_reported_as_a_group(two_buildings):
+    one, two = two_buildings
+    result = merge([one.a, two.a, one.b, two.b], config=MergeConfig(method="consensus"))
+    p = result.placements
+    assert [q.merged for q in p] == [True, False, True, False]
+    assert [q.group for q in p] == [0, 1, 0, 1]
+    # map 3 (second UT Austin window) in the frame of map 1 (the first one): the crops' truth
+    assert p[3].group_reference == 1 and p[1].group_reference == 1
+    d, r = placement_error(p[3].group_transform, two.truth, two.b)
+    assert d < 3 * two.a.resolution and r < math.radians(2.0)
+    assert p[1].group_transform.is_close(p[1].group_transform.identity(), atol=1e-9)
+    assert "group 1" in p[3].reason
+    assert 0.0 < p[3].confidence <= 1.0
+    (group,) = result.groups
+    assert group.members == (1, 3)
+    # the group's fused map holds both UT Austin windows' walls, in the first one's frame
+    assert group.grid.occupied_mask().sum() >= two.a.occupied_mask().sum()
+    assert not result.grid.occupied_mask().sum() > 2 * one.a.occupied_mask().sum()
+
+
+def test_cli_writes_each_groups_map_and_lists_it(two_buildings, tmp_path):
+    one, two = two_buildings
+    inputs = []
+    for name, g in (("a", one.a), ("c", two.a), ("b", one.b), ("d", two.b)):
+        save_map(g, tmp_path / f"{name}.yaml")
+        inputs.append(str(tmp_path / f"{name}.yaml"))
+    out = tmp_path / "m.yaml"
+    code = main(["merge", *inputs, "-o", str(out), "--quiet"])
+    assert code == 3                                           # some maps left out of m.yaml
+    rep = json.loads((tmp_path / "m.report.json").read_text())
+    assert rep["group_outputs"] == [str(tmp_path / "m.group1.yaml")]
+    entries = {Path(e["input"]).stem: e for e in rep["maps"]}
+    assert entries["d"]["group"] == 1 and entries["d"]["group_reference"] == inputs[1]
+    assert set(entries["d"]["group_transform"]) == {"x", "y", "theta"}
+    assert entries["b"]["group"] == 0 and "group_transform" not in entries["b"]
+    fused = load_map(tmp_path / "m.group1.yaml")
+    assert fused.resolution == two.a.resolution
+    assert fused.occupied_mask().sum() >= two.a.occupied_mask().sum()
+
+
+def test_a_map_linked_to_nothing_has_no_group(two_buildings):
+    one, two = two_buildings
+    result = merge([one.a, one.b, two.a], config=MergeConfig(method="consensus"))
+    assert result.placements[2].group is None and not result.groups
+    assert result.report(output="m.yaml")["group_outputs"] == []
