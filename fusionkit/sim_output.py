@@ -93,9 +93,7 @@ def write_run(sim, out_dir, *, world_path=None, stale=()) -> Path:
     """
     from .mapio import _protected, encode_map
     from .scanlog import encode_scans, scans_path_for
-    from .simulate import Simulation
-
-    if not isinstance(sim, Simulation):
+    if not all(hasattr(sim, a) for a in ("robots", "world", "config")):
         raise InputError(f"write_run needs a Simulation, got {type(sim).__name__}")
     out = check_run_dir(out_dir)
     previous = _previous_robot_files(out) if out.is_dir() else []

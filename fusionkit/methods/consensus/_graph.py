@@ -33,7 +33,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ...transform import Transform2D
-from ._pair import ConsensusConfig, displacement
+from ._pair import ConsensusConfig
+from ._verify import displacement
 from ._verify import refine_icp, verify
 
 __all__ = ["GraphResult", "solve_graph"]

@@ -15,7 +15,8 @@ from ...transform import Transform2D
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, rotation_candidates
-from ._verify import (DEFAULT_GATES, Check, NullModel, null_model, refine_cloud, refine_icp,
+from ._null import NullModel, null_model
+from ._verify import (DEFAULT_GATES, Check, displacement, refine_cloud, refine_icp,
                       refine_pso, verify)
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
@@ -248,21 +249,6 @@ def _corners(index: MapIndex) -> np.ndarray:
     rr = np.array([r.min(), r.min(), r.max(), r.max()], float)
     cc = np.array([c.min(), c.max(), c.min(), c.max()], float)
     return index.grid.cell_to_world(rr, cc)
-
-
-def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
-    """Largest distance (m) between where ``t1`` and ``t2`` put the points ``pts``."""
-    # the points move by t1 - t2 = (R1 - R2) p + (d1 - d2): plain arithmetic, as this is
-    # called for every two candidates of a pair
-    a = math.cos(t1.theta) - math.cos(t2.theta)
-    b = math.sin(t1.theta) - math.sin(t2.theta)
-    ex, ey = t1.x - t2.x, t1.y - t2.y
-    worst = 0.0
-    for x, y in pts.tolist():
-        worst = max(worst, (a * x - b * y + ex) ** 2 + (b * x + a * y + ey) ** 2)
-    return math.sqrt(worst)
-
-
 
 
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,

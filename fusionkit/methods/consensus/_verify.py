@@ -32,7 +32,7 @@ from ...transform import Transform2D
 from ._index import MapIndex
 
 __all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_cloud", "refine_pso", "Check",
-           "verify", "DEFAULT_GATES", "NullModel", "null_model", "search_tests"]
+           "verify", "displacement", "DEFAULT_GATES"]
 
 #: Pairing distances (cells) of the ICP stages, each run until the motion settles.
 DEFAULT_GATES = (8.0, 5.0, 3.0, 2.0)
@@ -338,173 +338,14 @@ def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:
                  (bad_ab + bad_ba) / total if total else 1.0)
 
 
-
-def _trials(chk) -> tuple[float, float]:
-    """``(hits, trials)`` of a check: wall cells meeting the other map's walls, out of the wall
-    cells compared, a cell on the other's clear free space counted as three misses (the
-    robust weighting of :meth:`Check.evidence`)."""
-    return float(chk.agreeing), float(chk.agreeing + chk.disagreeing + 2 * chk.conflicts)
-
-
-def _kl(f: float, p: float) -> float:
-    """Kullback-Leibler divergence of Bernoulli(f) from Bernoulli(p) (nats)."""
-    f = min(max(f, 1e-12), 1 - 1e-12)
-    p = min(max(p, 1e-12), 1 - 1e-12)
-    return f * math.log(f / p) + (1 - f) * math.log((1 - f) / (1 - p))
-
-
-@dataclass(frozen=True)
-class NullModel:
-    """How well two maps' walls meet at wrong placements, and the test a placement is judged by.
-
-    The wrong placements are ``len(fractions)`` placements refined by ICP from random starts
-    (a wall of B put on a wall of A at a random rotation) that end away from the placement
-    under test: the best a local search finds where the maps do not belong together. At each,
-    ``fractions`` holds the share of compared wall cells that meet the other map's walls (a
-    cell on clear free space counting as three misses) and ``trials`` the cells compared.
-    ``p0`` is their pooled share: the chance that a wall cell meets a wall at a wrong placement.
-    Wall cells come in lines, so neighbouring cells agree or not together; ``design`` is the
-    factor by which the shares vary more than independent cells would (their variance over the
-    binomial one), and a placement's cells count as ``trials / design`` independent ones.
-
-    A placement whose share ``f > p0`` of ``n`` compared cells is then reached by one wrong
-    placement with probability at most ``exp(-(n / design) KL(f || p0))`` (Chernoff), and its
-    number of false alarms is that times ``tests``, the number of distinct placements a search
-    can end on (:func:`search_tests`): the expected count of wrong placements that would fit
-    as well, which the user bounds by ``max_false_merge``. Neither depends on the cell size,
-    the extent or the clutter of the maps; all three enter through the maps' own wrong
-    placements. ``calibration`` (decades) is added to that count's logarithm: measured on
-    pairs of different buildings, the model's tail is lighter than the truth's (BENCHMARKS.md).
-    """
-
-    fractions: np.ndarray
-    trials: np.ndarray
-    p0: float
-    design: float
-    tests: float
-    calibration: float = 0.0
-
-    @property
-    def usable(self) -> bool:
-        """Whether enough wrong placements overlapped to judge by (eight or more)."""
-        return len(self.fractions) >= 8
-
-    def log10_nfa(self, chk) -> float:
-        """``log10`` of the number of false alarms of a placement with check ``chk``."""
-        if not self.usable:
-            return math.inf
-        k, n = _trials(chk)
-        top = math.log10(self.tests) + self.calibration
-        if n <= 0:
-            return top
-        f = k / n
-        if f <= self.p0:
-            return top
-        return top - (n / self.design) * _kl(f, self.p0) / math.log(10.0)
-
-    def nfa(self, chk) -> float:
-        """Number of false alarms of a placement with check ``chk``."""
-        lg = self.log10_nfa(chk)
-        return math.inf if lg == math.inf else 10.0 ** min(lg, 300.0)
-
-    def distinguishable(self, best, other, risk: float) -> bool:
-        """Whether placement ``best`` meets walls significantly more often than ``other`` (a
-        one-sided test of two shares at level ``risk``, with the design effect): when not, the
-        two fit about as well and the maps alone cannot tell them apart."""
-        kb, nb = _trials(best)
-        ko, no = _trials(other)
-        if nb <= 0:
-            return False
-        if no <= 0:
-            return True
-        fb, fo = kb / nb, ko / no
-        pooled = (kb + ko) / (nb + no)
-        var = max(pooled * (1 - pooled), 1e-9) * self.design * (1 / nb + 1 / no)
-        z = (fb - fo) / math.sqrt(var)
-        return z > _z_quantile(risk)
-
-
-def _z_quantile(risk: float) -> float:
-    """The standard normal quantile exceeded with probability ``risk``."""
-    from scipy.special import ndtri
-    return float(-ndtri(risk))
-
-
-def search_tests(a: MapIndex, b: MapIndex, basin_cells: float = 8.0, ) -> float:
-    """Distinct placements of B in A a search can end on: where B's centre can land on A's
-    known area, and at which rotation, counted in ICP basins (``basin_cells`` cells wide,
-    the widest pairing gate; the rotation step that moves B's farthest wall by that much)."""
-    known = float(np.count_nonzero(a.known))
-    positions = max(known / (basin_cells * basin_cells), 1.0)
-    if len(b.points):
-        centre = b.points.mean(axis=0)
-        reach = float(np.sqrt(((b.points - centre) ** 2).sum(axis=1)).max()) / b.resolution
-    else:
-        reach = 1.0
-    rotations = max(2 * math.pi * max(reach, basin_cells) / basin_cells, 1.0)
-    return positions * rotations
-
-
-def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray, *,
-               samples: int = 64, distinct: float, points: np.ndarray | None = None,
-               calibration: float = 0.0, correlation: float = 3.0,
-               seed=0) -> tuple[NullModel, list]:
-    """Sample the evidence of wrong placements of B in A (see :class:`NullModel`).
-
-    Parameters
-    ----------
-    a, b : MapIndex
-    away_from : Transform2D
-        The placement under test (B -> A): samples ending within ``distinct`` m of it (at
-        B's corners ``box``) are not wrong placements and are drawn again (up to three times
-        as many starts in all).
-    samples : int
-        Wrong placements wanted.
-    points : (K, 2) float, optional
-        B's wall points the ICP runs on (default ``b.refine_points``).
-    calibration : float
-        See :class:`NullModel`.
-    correlation : float
-        Length of wall (m) whose cells agree or not together, the prior the measured design
-        effect is shrunk towards.
-    seed : int or numpy.random.Generator
-
-    Returns
-    -------
-    (NullModel, list of (Transform2D, Check))
-        The model and the wrong placements sampled (rivals of the placement under test).
-    """
-    from ._pair import displacement
-    rng = np.random.default_rng(seed)
-    pts = b.refine_points if points is None else points
-    out = []
-    if len(a.points) and len(pts):
-        for _ in range(3 * samples):
-            if len(out) >= samples:
-                break
-            th = float(rng.uniform(-math.pi, math.pi))
-            pa = a.points[int(rng.integers(len(a.points)))]
-            pb = pts[int(rng.integers(len(pts)))]
-            c, s = math.cos(th), math.sin(th)
-            start = Transform2D(float(pa[0] - (c * pb[0] - s * pb[1])),
-                                float(pa[1] - (s * pb[0] + c * pb[1])), th)
-            t = refine_icp(a, pts, start)
-            if displacement(t, away_from, box) <= distinct:
-                continue
-            out.append((t, verify(a, b, t)))
-    kn = np.array([_trials(chk) for _, chk in out], float).reshape(-1, 2)
-    kn = kn[kn[:, 1] > 0]
-    if len(kn):
-        f = kn[:, 0] / kn[:, 1]
-        p0 = float(kn[:, 0].sum() / kn[:, 1].sum())
-        binom = max(p0 * (1 - p0), 1e-9) / kn[:, 1]
-        # the median ratio (over that of a chi-square with one degree of freedom, 0.455): a few
-        # wrong placements on repeated structure must not hide how alike the others are
-        measured = max(float(np.median((f - p0) ** 2 / binom)) / 0.455, 1.0)
-        # sixty-odd wrong placements measure it only roughly (from a few tens to a few hundred
-        # cells on one map): shrink it towards the cells of ``correlation`` metres of wall
-        # (geometric mean)
-        design = math.sqrt(measured * max(correlation / a.resolution, 1.0))
-    else:
-        f, p0, design = np.zeros(0), 1.0, 1.0
-    return NullModel(f, kn[:, 1], p0, design, search_tests(a, b), calibration), out
+def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
+    """Largest distance (m) between where ``t1`` and ``t2`` put the points ``pts``."""
+    # the points move by t1 - t2 = (R1 - R2) p + (d1 - d2): plain arithmetic, as this is
+    # called for every two candidates of a pair
+    a = math.cos(t1.theta) - math.cos(t2.theta)
+    b = math.sin(t1.theta) - math.sin(t2.theta)
+    ex, ey = t1.x - t2.x, t1.y - t2.y
+    worst = 0.0
+    for x, y in pts.tolist():
+        worst = max(worst, (a * x - b * y + ex) ** 2 + (b * x + a * y + ey) ** 2)
+    return math.sqrt(worst)
