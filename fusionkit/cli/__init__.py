@@ -16,7 +16,8 @@ from ..errors import FusionkitError
 __all__ = ["main", "build_parser"]
 
 #: Subcommand modules, in the order ``fusionkit --help`` lists them.
-COMMAND_MODULES = ("run", "simulate", "merge", "evaluate", "importer", "export", "tui", "bench")
+COMMAND_MODULES = ("run", "simulate", "merge", "evaluate", "importer", "export", "tui", "bench",
+                   "ros2")
 
 
 def build_parser() -> argparse.ArgumentParser:
