@@ -98,10 +98,16 @@ class MergeNode:
 
     # -- helpers ----------------------------------------------------------------------------
     def _once(self, key, text: str, level: str = "warning") -> None:
-        """Log ``text`` the first time ``key`` is seen."""
-        if key not in self._warned:
-            self._warned.add(key)
-            getattr(self.log, level)(text)
+        """Log ``text`` the first time ``key`` is seen (rclpy wants one severity per call site)."""
+        if key in self._warned:
+            return
+        self._warned.add(key)
+        if level == "info":
+            self.log.info(text)
+        elif level == "error":
+            self.log.error(text)
+        else:
+            self.log.warning(text)
 
     def _guard(self, fn):
         """An executor callback that logs an unexpected error once instead of raising it."""
@@ -138,8 +144,8 @@ class MergeNode:
         for name, r in self.robots.items():
             gone = name not in seen or self.node.count_publishers(r.topic) == 0
             if gone and not r.vanished:
-                self.log.warning(f"{name}: {r.topic} has no publisher any more; its last map "
-                                 f"stays in the merge")
+                kept = "its last map stays in the merge" if r.grid is not None else "it had no valid map"
+                self.log.warning(f"{name}: {r.topic} has no publisher any more; {kept}")
             elif r.vanished and not gone:
                 self.log.info(f"{name}: {r.topic} is published again")
             r.vanished = gone
@@ -150,12 +156,12 @@ class MergeNode:
                                                 latched_qos())
         with self._lock:
             self.robots[name] = r
-            if self.reference is None and not self.s.known_init_poses:
-                self.reference = name
             if self.s.known_init_poses:
                 self.tracker.fix(name, self.s.init_poses[name])
+                r.last_action = "known initial pose"
             elif name == self.reference:
                 self.tracker.fix(name, _identity())
+                r.last_action = "reference"
         r.sub = self.node.create_subscription(self._GridMsg, topic,
                                               self._guard(lambda msg, _r=r: self._on_map(_r, msg)),
                                               latched_qos())
@@ -175,6 +181,13 @@ class MergeNode:
         if r.problem:
             self.log.info(f"{r.name}: valid map again")
         with self._lock:
+            if self.reference is None and not self.s.known_init_poses:
+                # the first robot with a valid map: its map frame is the merged frame
+                self.reference = r.name
+                self.tracker.fix(r.name, _identity())
+                r.last_action = "reference"
+                self.log.info(f"{r.name}: reference robot (its map frame is the merged frame)")
+                self._publish_pose(r)
             r.problem = ""
             r.grid = grid
             r.received = time.monotonic()
@@ -264,6 +277,15 @@ class MergeNode:
                 done = version
 
     def _estimate_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self._estimate_forever()
+            except Exception as exc:  # noqa: BLE001 - log once, start over
+                self._once(("estimate-loop", type(exc).__name__),
+                           f"estimation stopped by {type(exc).__name__}: {exc}; restarting", "error")
+                self._stop.wait(1.0)
+
+    def _estimate_forever(self) -> None:
         period = 1.0 / self.s.estimation_rate
         done = -1
         while not self._stop.wait(period if done >= 0 else 0.5):
