@@ -258,9 +258,12 @@ def test_known_init_poses_from_a_map_merge_params_file(procs, run3, tmp_path):
     (["merge-node", "--ros-args", "-p", "merging_rate:=fast"], "parameter merging_rate: expected a number"),
     (["merge-node", "--ros-args", "-p", "method:=magic"], "parameter method: 'magic' is not a method"),
     (["merge-node", "--params-file", "missing.yaml"], "missing.yaml: parameter file not found"),
+    (["merge-node", "--params-file", "broken.yaml"], "Couldn't parse params file"),
+    (["merge-node", "--ros-args", "-p"], "ROS arguments '--ros-args -p' not understood"),
     (["play", "nowhere"], "nowhere: not a directory"),
 ])
 def test_bad_input_is_one_line_and_exit_2(procs, argv, message):
+    (procs.tmp / "broken.yaml").write_text("map_merge:\n  ros__parameters:\n    merging_rate: [1,\n")
     p = procs.start("cmd", FUSIONKIT + ["ros2", *argv])
     assert p.wait(60) == 2
     out = procs.log("cmd").strip().splitlines()

@@ -38,6 +38,31 @@ def ros_argv(prog: str, ros_args=(), params_files=()) -> list[str]:
 
 
 @contextlib.contextmanager
+def _stderr_held():
+    """Hold what C code writes on stderr (rcl logs its own line before raising); let it out
+    only when the block succeeds, so that a bad argument is reported in one line."""
+    import sys
+    import tempfile
+
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        ok = False
+        try:
+            yield
+            ok = True
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            if ok:
+                held.seek(0)
+                text = held.read()
+                if text:
+                    os.write(2, text)
+
+
+@contextlib.contextmanager
 def ros_context(argv):
     """``rclpy`` initialised with ``argv``; shut down on the way out however it is left
     (Ctrl-C and SIGTERM end the block without a traceback)."""
@@ -49,7 +74,8 @@ def ros_context(argv):
             raise InputError(f"--params-file {argv[i + 1] if i + 1 < len(argv) else ''}: "
                              f"parameter file not found")
     try:
-        rclpy.init(args=list(argv))
+        with _stderr_held():
+            rclpy.init(args=list(argv))
     except Exception as exc:  # noqa: BLE001 - rcl reports bad arguments as RCLError
         raise InputError(f"ROS arguments {' '.join(argv[1:])!r} not understood: "
                          f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None

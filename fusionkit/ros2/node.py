@@ -71,6 +71,7 @@ class MergeNode:
                                switch_confirmations=settings.switch_confirmations)
         self.estimations = 0
         self.last_estimation_s = None
+        self.last_merge_s = None     # seconds to fuse and publish the last merged map
         self._map_version = 0       # bumped by every accepted map message
         self._held_version = 0      # bumped by every change of a held transform
         self._warned: set = set()
@@ -232,6 +233,7 @@ class MergeNode:
         return {"reference": self.reference, "world_frame": self.s.world_frame,
                 "method": "known_init_poses" if self.s.known_init_poses else self.s.method,
                 "estimations": self.estimations, "last_estimation_seconds": self.last_estimation_s,
+                "last_merge_seconds": self.last_merge_s,
                 "robots": robots}
 
     def _publish_status(self) -> None:
@@ -266,10 +268,12 @@ class MergeNode:
                 if ref_grid is not None:  # the reference first: its resolution is the merged one
                     placed.sort(key=lambda gh: gh[0] is not ref_grid)
                 import fusionkit as fk
+                t0 = time.perf_counter()
                 fused = fk.fuse_maps([g for g, _ in placed], [h[0] for _, h in placed]).grid
                 msg = self._GridMsg()
                 fill_msg(msg, fused, self.s.world_frame, self._stamp())
                 self.merged_pub.publish(msg)
+                self.last_merge_s = round(time.perf_counter() - t0, 4)
                 last, done = time.monotonic(), version
                 self._publish_status()
             except Exception as exc:  # noqa: BLE001 - log once, go on
