@@ -9,6 +9,8 @@ import pytest
 from nav_msgs.msg import OccupancyGrid as GridMsg
 
 import fusionkit as fk
+# the module path: once imported, the submodule shadows the lazy name fk.simulate
+from fusionkit.simulate import SimulationConfig, simulate, write_run
 from fusionkit.ros2._convert import BadMap, fill_msg, grid_from_msg
 from fusionkit.ros2._names import is_robot_map_topic, parent_namespace
 from fusionkit.ros2._params import settings_from
@@ -135,8 +137,8 @@ def test_an_interrupted_run_of_better_estimates_starts_over():
 
 
 def test_play_finds_a_runs_robots_and_grows_their_maps(tmp_path):
-    sim = fk.simulate(fk.default_world(), fk.SimulationConfig(robots=2, poses=300, seed=3))
-    fk.write_run(sim, tmp_path / "run")
+    sim = simulate(fk.default_world(), SimulationConfig(robots=2, poses=300, seed=3))
+    write_run(sim, tmp_path / "run")
     robots = find_robots(tmp_path / "run")
     assert [r.name for r in robots] == ["robot_1", "robot_2"]
     steps = growth_steps(robots[0], 4)

@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 
 import fusionkit as fk
+# the module path: once imported, the submodule shadows the lazy name fk.simulate
+from fusionkit.simulate import SimulationConfig, simulate, write_run
 
 HERE = Path(__file__).parent
 FUSIONKIT = [sys.executable, "-c", "import sys; from fusionkit.cli import main; sys.exit(main())"]
@@ -114,9 +116,9 @@ def procs(tmp_path):
 
 @pytest.fixture(scope="module")
 def run3(tmp_path_factory):
-    sim = fk.simulate(fk.default_world(), fk.SimulationConfig(robots=3, poses=1500, seed=1))
+    sim = simulate(fk.default_world(), SimulationConfig(robots=3, poses=1500, seed=1))
     out = tmp_path_factory.mktemp("ros2") / "run3"
-    fk.write_run(sim, out)
+    write_run(sim, out)
     return out
 
 

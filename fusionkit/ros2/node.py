@@ -11,7 +11,7 @@ Published, besides the merged map (``merged_map_topic``, frame ``world_frame``):
   frame lies in the merged frame, e.g. ``/map_merge/robot1/transform``;
 * ``~/status`` (``std_msgs/msg/String``, latched): JSON with every robot's state, transform
   and confidence;
-* ``/tf`` (``world_frame`` -> ``<robot>/map``) when ``tf2_ros`` can be imported.
+* ``/tf_static`` (``world_frame`` -> ``<robot>/map``) when ``tf2_ros`` can be imported.
 """
 
 from __future__ import annotations
@@ -63,7 +63,6 @@ class MergeNode:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._wake_compose = threading.Event()
-        self._wake_estimate = threading.Event()
         self.robots: dict[str, Robot] = {}
         self.reference = settings.reference_robot or None
         self.tracker = Tracker(min_confidence=settings.min_confidence,
@@ -79,9 +78,9 @@ class MergeNode:
         self.merged_topic = self.merged_pub.topic_name
         self.status_pub = node.create_publisher(String, "~/status", latched_qos())
         self.tf = None
-        try:
-            from tf2_ros import TransformBroadcaster  # not on the package index: optional
-            self.tf = TransformBroadcaster(node)
+        try:  # tf2 is not on the package index: /tf_static only where a ROS install has it
+            from tf2_ros import StaticTransformBroadcaster
+            self.tf = StaticTransformBroadcaster(node)
         except Exception:  # noqa: BLE001 - absent or broken tf2: the topics say it all
             self.tf = None
         mode = ("known initial poses" if settings.known_init_poses else
@@ -163,8 +162,10 @@ class MergeNode:
             elif name == self.reference:
                 self.tracker.fix(name, _identity())
                 r.last_action = "reference"
-        r.sub = self.node.create_subscription(self._GridMsg, topic,
-                                              self._guard(lambda msg, _r=r: self._on_map(_r, msg)),
+        def on_map(msg, _r=r):
+            self._on_map(_r, msg)
+
+        r.sub = self.node.create_subscription(self._GridMsg, topic, self._guard(on_map),
                                               latched_qos())
         role = " (reference: its map frame is the merged frame)" if name == self.reference else ""
         self.log.info(f"{name}: subscribed to {topic}{role}")
