@@ -10,7 +10,9 @@ placed the robots:
   apart; each latency is the time from that publish to the arrival here of the next merged map.
   The baseline, measured in this same script, is the work the node cannot avoid for one update:
   ``fusionkit.fuse_maps`` of the same maps with the node's transforms plus filling the message
-  (median of 10). The node's own time for that work, from its status, is printed beside it.
+  (median of 10); the second baseline is the node's own time for that work, from its status
+  (``last_merge_seconds``), so ``latency_over_node_merge`` is what the transport and the
+  scheduling add to the work itself.
 
 Everything talks over loopback only (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, a random
 ``ROS_DOMAIN_ID``); the node is stopped with SIGINT by its handle.
@@ -132,6 +134,8 @@ def bench(n_robots: int, *, poses: int, seed: int, updates: int, idle: float, ti
             "latency_max_s": round(max(latencies), 4) if latencies else None,
             "baseline_median_s": round(statistics.median(base), 4),
             "node_merge_median_s": statistics.median(inside) if inside else None,
+            "latency_over_node_merge": round(statistics.median(latencies) / statistics.median(inside), 2)
+            if latencies and inside else None,
             "latency_over_baseline": round(statistics.median(latencies) / statistics.median(base), 1)
             if latencies else None,
             "updates_answered": len(latencies), "node_exit": rc,

@@ -100,6 +100,7 @@ def play(run_dir, *, duration: float, steps: int, topic: str = "map", hold: floa
         raise InputError("--duration must be >= 0 s and --steps >= 1")
     from ._runtime import ros_context
 
+    log(f"building {steps} map steps for each of {len(robots)} robots")
     plans = []
     for r in robots:
         plans.append((r, growth_steps(r, steps)))
