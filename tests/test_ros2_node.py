@@ -192,26 +192,37 @@ def test_node_merges_a_played_run_holds_transforms_and_survives_bad_input(procs,
     assert status["robots"]["/robot_bad"]["placed"] is False
     assert status["robots"]["/robot_bad"]["map"] is None
 
-    # the merged map arrived, in the world frame, larger than the reference map alone
-    maps = _records(probe_out, "map")
-    assert maps and maps[-1]["frame"] == "world"
-    assert maps[-1]["known"] > status["robots"]["/robot_1"]["map"]["width"] * 10
-
-    # every published transform matches the truth within 2 cells and 1 degree
     truth = {r["name"]: fk.Transform2D.from_dict(r["transform"])
              for r in json.loads((run3 / "truth.json").read_text())["robots"]}
+    reference = status["reference"].strip("/")   # the first robot whose map arrived
+    assert reference in truth
+
+    # the merged map arrived, in the world frame: the three last maps fused with the published
+    # transforms, covering what they cover with the true transforms
+    maps = _records(probe_out, "map")
+    assert maps and maps[-1]["frame"] == "world"
+    names = [reference] + sorted(set(truth) - {reference})
+    grids = [fk.load_map(run3 / f"{n}.yaml") for n in names]
+    held = [fk.Transform2D.from_dict(status["robots"][f"/{n}"]["transform"]) for n in names]
+    fused = fk.fuse_maps(grids, held).grid
+    assert maps[-1]["known"] == pytest.approx(int(fused.known_mask().sum()), rel=0.01)
+    assert maps[-1]["occupied"] == pytest.approx(int(fused.occupied_mask().sum()), rel=0.01)
+    oracle = fk.fuse_maps(grids, [truth[reference].inverse @ truth[n] for n in names]).grid
+    assert maps[-1]["known"] == pytest.approx(int(oracle.known_mask().sum()), rel=0.02)
+
+    # every published transform matches the truth within 2 cells and 1 degree
     poses = _records(probe_out, "pose")
     for name in ("robot_1", "robot_2", "robot_3"):
         mine = [fk.Transform2D(p["x"], p["y"], p["theta"]) for p in poses if p["robot"] == name]
         assert mine, f"no transform published for {name}"
-        expected = truth["robot_1"].inverse @ truth[name]
+        expected = truth[reference].inverse @ truth[name]
         for t in mine:
             dist, ang = t.error_to(expected)
             assert dist <= 2 * 0.1 and ang <= 0.0175, (name, t, expected)
         assert all(p["frame"] == "world" for p in poses if p["robot"] == name)
 
     # placed once, the transform stays while the map grows
-    for name in ("/robot_2", "/robot_3"):
+    for name in {"/robot_1", "/robot_2", "/robot_3"} - {status["reference"]}:
         seen = [(s["status"]["robots"][name]["updates"], s["status"]["robots"][name]["transform"])
                 for s in _records(probe_out, "status")
                 if s["status"]["robots"].get(name, {}).get("placed")]
