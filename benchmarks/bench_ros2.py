@@ -151,7 +151,7 @@ def main(argv=None) -> int:
     ap.add_argument("--idle", type=float, default=20.0)
     ap.add_argument("--timeout", type=float, default=300.0, help="seconds to wait for placement")
     args = ap.parse_args(argv)
-    os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 100)))
+    os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 101)))
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
     import rclpy
     rclpy.init()

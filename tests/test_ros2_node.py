@@ -56,7 +56,7 @@ class Processes:
         self.env = {**os.environ,
                     # isolation from other ROS graphs on this machine, not a computation: any
                     # free domain will do
-                    "ROS_DOMAIN_ID": str(random.SystemRandom().randint(1, 100)),
+                    "ROS_DOMAIN_ID": str(random.SystemRandom().randint(1, 101)),
                     "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
                     "ROS_LOG_DIR": str(tmp_path / "roslog"),
                     "PYTHONUNBUFFERED": "1"}

@@ -162,6 +162,7 @@ class MergeNode:
             elif name == self.reference:
                 self.tracker.fix(name, _identity())
                 r.last_action = "reference"
+
         def on_map(msg, _r=r):
             self._on_map(_r, msg)
 
