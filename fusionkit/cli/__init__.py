@@ -31,6 +31,7 @@ COMMANDS = {
     "export": ("export", "write a simulated run as a ROS bag"),
     "tui": ("tui", "terminal UI: pick robot maps, watch the PSO converge, export the merged map"),
     "bench": ("bench", "compare merging methods on seeded cases made from ground-truth maps"),
+    "ros2": ("ros2", "ROS 2: a live merge node (drop-in for multirobot_map_merge), a run player"),
 }
 
 #: The subcommand modules, in listing order.

@@ -1,0 +1,82 @@
+"""One robot as the node sees it, and one round of transform estimation over all robots."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from .. import OccupancyGrid
+from ._params import NodeSettings
+from ._tracker import Decision, Tracker
+
+__all__ = ["Robot", "estimate_round"]
+
+
+@dataclass(eq=False)
+class Robot:
+    """A discovered robot: its map topic, its last valid map and what was decided about it."""
+
+    name: str
+    topic: str
+    grid: OccupancyGrid | None = None
+    received: float = 0.0
+    updates: int = 0
+    problem: str = ""
+    vanished: bool = False
+    last_action: str = ""
+    last_why: str = ""
+    sub: object = None
+    pose_pub: object = None
+
+
+def estimate_round(snapshot: list, reference: str, settings: NodeSettings, tracker: Tracker,
+                   cancel: Callable[[], bool] = lambda: False) -> list[Decision]:
+    """Estimate every robot's transform into the reference robot's map frame and let the
+    tracker decide what to hold.
+
+    Parameters
+    ----------
+    snapshot : list of (name, OccupancyGrid)
+        Every robot with a map (the reference among them).
+    reference : str
+        Name of the reference robot (it is held at the identity and gets no decision).
+    cancel : callable
+        Returns True to stop the estimation (:class:`fusionkit.MergeCancelled`).
+
+    Returns
+    -------
+    list of Decision
+        One per robot other than the reference.
+    """
+    import fusionkit as fk
+
+    grids = dict(snapshot)
+    names = [reference] + sorted(n for n in grids if n != reference)
+    result = fk.merge([grids[n] for n in names],
+                      config=fk.MergeConfig(method=settings.method, reference=0, seed=settings.seed),
+                      callback=lambda _ev: cancel())
+    decisions = []
+    for k, name in enumerate(names[1:], start=1):
+        p = result.placements[k]
+        estimate = p.transform if p.merged else None
+
+        def score(t, _name=name):
+            return _score_against_others(grids, tracker, _name, t)
+
+        decisions.append(tracker.decide(name, estimate, float(p.confidence), p.reason,
+                                        grids[name].resolution, score=score))
+    return decisions
+
+
+def _score_against_others(grids: dict, tracker: Tracker, name: str, transform) -> float:
+    """How well ``grids[name]`` placed by ``transform`` agrees with the other held maps fused
+    (:func:`fusionkit.overlap_score`, 0-1)."""
+    import fusionkit as fk
+
+    others = [(grids[n], tracker.held(n)[0]) for n in grids
+              if n != name and tracker.held(n) is not None]
+    if not others:
+        return 0.0
+    fused = fk.fuse_maps([g for g, _ in others], [t for _, t in others]).grid
+    score, _cells = fk.overlap_score(fused, grids[name], transform)
+    return float(score)

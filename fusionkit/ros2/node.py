@@ -1,0 +1,352 @@
+"""The live merge node: a drop-in for multirobot_map_merge.
+
+It discovers robots by their map topics (``/<robot>/map``), subscribes to them latched,
+estimates the robots' transforms in a worker thread at ``estimation_rate`` with
+:func:`fusionkit.merge`, keeps each accepted transform until a confidently better one comes
+(:mod:`._tracker`), and publishes the merged map latched at most ``merging_rate`` times a second.
+
+Published, besides the merged map (``merged_map_topic``, frame ``world_frame``):
+
+* ``~/<robot>/transform`` (``geometry_msgs/msg/PoseStamped``, latched): where the robot's map
+  frame lies in the merged frame, e.g. ``/map_merge/robot1/transform``;
+* ``~/status`` (``std_msgs/msg/String``, latched): JSON with every robot's state, transform
+  and confidence;
+* ``/tf_static`` (``world_frame`` -> ``<robot>/map``) when ``tf2_ros`` can be imported.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+
+from .. import FusionkitError, MergeCancelled
+from ._convert import BadMap, fill_msg, fill_pose, grid_from_msg
+from ._names import is_robot_map_topic, parent_namespace, robot_slug
+from ._params import PARAMETERS, NodeSettings, settings_from
+from ._robots import Robot, estimate_round
+from ._tracker import Tracker
+
+__all__ = ["MergeNode", "latched_qos", "read_settings"]
+
+
+def latched_qos():
+    """The QoS of a ROS 1 latched topic: keep the last message for late subscribers."""
+    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+    return QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                      reliability=ReliabilityPolicy.RELIABLE)
+
+
+def read_settings(node) -> NodeSettings:
+    """The node's parameters as :class:`NodeSettings` (declaring the missing ones with their
+    defaults, so ``ros2 param`` users see them all)."""
+    for name, (default, _kind, _help) in PARAMETERS.items():
+        if not node.has_parameter(name):
+            node.declare_parameter(name, default)
+    values = {name: p.value for name, p in node.get_parameters_by_prefix("").items()}
+    return settings_from(values)
+
+
+class MergeNode:
+    """The merge node around an ``rclpy`` node (``self.node``); :meth:`close` stops it."""
+
+    def __init__(self, node, settings: NodeSettings):
+        from geometry_msgs.msg import PoseStamped
+        from nav_msgs.msg import OccupancyGrid as GridMsg
+        from std_msgs.msg import String
+
+        self.node, self.s = node, settings
+        self.log = node.get_logger()
+        self._GridMsg, self._Pose, self._String = GridMsg, PoseStamped, String
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._wake_compose = threading.Event()
+        self.robots: dict[str, Robot] = {}
+        self.reference = settings.reference_robot or None
+        self.tracker = Tracker(min_confidence=settings.min_confidence,
+                               switch_margin=settings.switch_margin,
+                               switch_confirmations=settings.switch_confirmations)
+        self.estimations = 0
+        self.last_estimation_s = None
+        self.last_merge_s = None     # seconds to fuse and publish the last merged map
+        self._map_version = 0       # bumped by every accepted map message
+        self._held_version = 0      # bumped by every change of a held transform
+        self._warned: set = set()
+        self.merged_pub = node.create_publisher(GridMsg, settings.merged_map_topic, latched_qos())
+        self.merged_topic = self.merged_pub.topic_name
+        self.status_pub = node.create_publisher(String, "~/status", latched_qos())
+        self.tf = None
+        try:  # tf2 is not on the package index: /tf_static only where a ROS install has it
+            from tf2_ros import StaticTransformBroadcaster
+            self.tf = StaticTransformBroadcaster(node)
+        except Exception:  # noqa: BLE001 - absent or broken tf2: the topics say it all
+            self.tf = None
+        mode = ("known initial poses" if settings.known_init_poses else
+                f"method {settings.method}, estimation every {1 / settings.estimation_rate:.1f} s")
+        self.log.info(f"map merging started: robots' '{settings.robot_map_topic}' topics into "
+                      f"{self.merged_topic} (frame {settings.world_frame}), {mode}")
+        self._discover()
+        node.create_timer(1.0 / settings.discovery_rate, self._guard(self._discover))
+        self._threads = [threading.Thread(target=self._compose_loop, name="compose", daemon=True)]
+        if not settings.known_init_poses:
+            self._threads.append(threading.Thread(target=self._estimate_loop, name="estimate",
+                                                  daemon=True))
+        for t in self._threads:
+            t.start()
+
+    # -- helpers ----------------------------------------------------------------------------
+    def _once(self, key, text: str, level: str = "warning") -> None:
+        """Log ``text`` the first time ``key`` is seen (rclpy wants one severity per call site)."""
+        if key in self._warned:
+            return
+        self._warned.add(key)
+        if level == "info":
+            self.log.info(text)
+        elif level == "error":
+            self.log.error(text)
+        else:
+            self.log.warning(text)
+
+    def _guard(self, fn):
+        """An executor callback that logs an unexpected error once instead of raising it."""
+        def run(*a):
+            try:
+                fn(*a)
+            except Exception as exc:  # noqa: BLE001 - the node must go on
+                self._once(("error", fn.__name__, type(exc).__name__),
+                           f"{fn.__name__}: {type(exc).__name__}: {exc}", "error")
+        return run
+
+    def _stamp(self):
+        return self.node.get_clock().now().to_msg()
+
+    # -- discovery and subscriptions (executor thread) ----------------------------------------
+    def _discover(self) -> None:
+        s = self.s
+        seen = set()
+        for topic, types in self.node.get_topic_names_and_types():
+            if not is_robot_map_topic(topic, types, robot_map_topic=s.robot_map_topic,
+                                      robot_namespace=s.robot_namespace,
+                                      merged_topic=self.merged_topic):
+                continue
+            name = parent_namespace(topic)
+            seen.add(name)
+            if name in self.robots:
+                continue
+            if s.known_init_poses and name not in s.init_poses:
+                self._once(("nopose", name),
+                           f"{name}: no known initial pose: set {name}/map_merge/init_pose_x, _y, "
+                           f"_yaw, or set known_init_poses to false; robot skipped")
+                continue
+            self._add_robot(name, topic)
+        for name, r in self.robots.items():
+            gone = name not in seen or self.node.count_publishers(r.topic) == 0
+            if gone and not r.vanished:
+                kept = "its last map stays in the merge" if r.grid is not None else "it had no valid map"
+                self.log.warning(f"{name}: {r.topic} has no publisher any more; {kept}")
+            elif r.vanished and not gone:
+                self.log.info(f"{name}: {r.topic} is published again")
+            r.vanished = gone
+
+    def _add_robot(self, name: str, topic: str) -> None:
+        r = Robot(name, topic)
+        r.pose_pub = self.node.create_publisher(self._Pose, f"~/{robot_slug(name)}/transform",
+                                                latched_qos())
+        with self._lock:
+            self.robots[name] = r
+            if self.s.known_init_poses:
+                self.tracker.fix(name, self.s.init_poses[name])
+                r.last_action = "known initial pose"
+            elif name == self.reference:
+                self.tracker.fix(name, _identity())
+                r.last_action = "reference"
+
+        def on_map(msg, _r=r):
+            self._on_map(_r, msg)
+
+        r.sub = self.node.create_subscription(self._GridMsg, topic, self._guard(on_map),
+                                              latched_qos())
+        role = " (reference: its map frame is the merged frame)" if name == self.reference else ""
+        self.log.info(f"{name}: subscribed to {topic}{role}")
+        if name in {self.reference} | set(self.s.init_poses):
+            self._publish_pose(r)
+
+    def _on_map(self, r: Robot, msg) -> None:
+        try:
+            grid = grid_from_msg(msg, name=r.name, max_cells=self.s.max_map_cells)
+        except BadMap as exc:
+            self._once(("bad", r.name, str(exc)), f"{r.name}: map refused: {exc}; the robot is "
+                                                  f"skipped until a valid map arrives")
+            r.problem = str(exc)
+            return
+        if r.problem:
+            self.log.info(f"{r.name}: valid map again")
+        with self._lock:
+            if self.reference is None and not self.s.known_init_poses:
+                # the first robot with a valid map: its map frame is the merged frame
+                self.reference = r.name
+                self.tracker.fix(r.name, _identity())
+                r.last_action = "reference"
+                self.log.info(f"{r.name}: reference robot (its map frame is the merged frame)")
+                self._publish_pose(r)
+            r.problem = ""
+            r.grid = grid
+            r.received = time.monotonic()
+            r.updates += 1
+            self._map_version += 1
+        self._wake_compose.set()
+
+    # -- publishing (worker threads) ----------------------------------------------------------
+    def _publish_pose(self, r: Robot) -> None:
+        held = self.tracker.held(r.name)
+        if held is None or r.pose_pub is None:
+            return
+        msg = self._Pose()
+        msg.header.frame_id = self.s.world_frame
+        msg.header.stamp = self._stamp()
+        fill_pose(msg.pose, held[0])
+        r.pose_pub.publish(msg)
+        if self.tf is not None:
+            from geometry_msgs.msg import TransformStamped
+            t = TransformStamped()
+            t.header = msg.header
+            t.child_frame_id = f"{robot_slug(r.name)}/map"
+            t.transform.translation.x, t.transform.translation.y = msg.pose.position.x, msg.pose.position.y
+            t.transform.rotation = msg.pose.orientation
+            self.tf.sendTransform(t)
+
+    def status(self) -> dict:
+        """What the node knows, as published on ``~/status``."""
+        robots = {}
+        with self._lock:
+            items = list(self.robots.items())
+        for name, r in items:
+            held = self.tracker.held(name)
+            robots[name] = {
+                "topic": r.topic, "placed": held is not None,
+                "transform": None if held is None else held[0].as_dict(4),
+                "confidence": None if held is None else round(held[1], 4),
+                "last_decision": r.last_action, "reason": r.last_why,
+                "map": None if r.grid is None else {"width": r.grid.cols, "height": r.grid.rows,
+                                                    "resolution": r.grid.resolution},
+                "updates": r.updates, "problem": r.problem or None, "vanished": r.vanished}
+        return {"reference": self.reference, "world_frame": self.s.world_frame,
+                "method": "known_init_poses" if self.s.known_init_poses else self.s.method,
+                "estimations": self.estimations, "last_estimation_seconds": self.last_estimation_s,
+                "last_merge_seconds": self.last_merge_s,
+                "robots": robots}
+
+    def _publish_status(self) -> None:
+        self.status_pub.publish(self._String(data=json.dumps(self.status(), sort_keys=True)))
+
+    def _compose_loop(self) -> None:
+        period = 1.0 / self.s.merging_rate
+        done = (-1, -1)
+        last = -math.inf
+        while not self._stop.is_set():
+            self._wake_compose.wait(timeout=1.0)
+            self._wake_compose.clear()
+            if self._stop.is_set():
+                break
+            with self._lock:
+                version = (self._map_version, self._held_version)
+            if version == done:
+                continue
+            wait = last + period - time.monotonic()
+            if wait > 0 and self._stop.wait(wait):
+                break
+            try:
+                with self._lock:
+                    version = (self._map_version, self._held_version)
+                    placed = [(r.grid, self.tracker.held(n)) for n, r in self.robots.items()
+                              if r.grid is not None and self.tracker.held(n) is not None]
+                    first = self.reference
+                    ref_grid = self.robots[first].grid if first in self.robots else None
+                if not placed:
+                    done = version
+                    continue
+                if ref_grid is not None:  # the reference first: its resolution is the merged one
+                    placed.sort(key=lambda gh: gh[0] is not ref_grid)
+                import fusionkit as fk
+                t0 = time.perf_counter()
+                fused = fk.fuse_maps([g for g, _ in placed], [h[0] for _, h in placed]).grid
+                msg = self._GridMsg()
+                fill_msg(msg, fused, self.s.world_frame, self._stamp())
+                self.merged_pub.publish(msg)
+                self.last_merge_s = round(time.perf_counter() - t0, 4)
+                last, done = time.monotonic(), version
+                self._publish_status()
+            except Exception as exc:  # noqa: BLE001 - log once, go on
+                self._once(("compose", type(exc).__name__), f"merged map not composed: {exc}", "error")
+                done = version
+
+    def _estimate_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self._estimate_forever()
+            except Exception as exc:  # noqa: BLE001 - log once, start over
+                self._once(("estimate-loop", type(exc).__name__),
+                           f"estimation stopped by {type(exc).__name__}: {exc}; restarting", "error")
+                self._stop.wait(1.0)
+
+    def _estimate_forever(self) -> None:
+        period = 1.0 / self.s.estimation_rate
+        done = -1
+        while not self._stop.wait(period if done >= 0 else 0.5):
+            with self._lock:
+                version = self._map_version
+                ref = self.reference
+                snapshot = [(n, r.grid) for n, r in self.robots.items() if r.grid is not None]
+            if version == done or ref not in dict(snapshot) or len(snapshot) < 2:
+                if ref is not None and snapshot and ref not in dict(snapshot):
+                    self._once(("noref", ref), f"waiting for the reference robot {ref}'s map", "info")
+                continue
+            t0 = time.perf_counter()
+            try:
+                decisions = estimate_round(snapshot, ref, self.s, self.tracker,
+                                           cancel=self._stop.is_set)
+            except MergeCancelled:
+                break
+            except FusionkitError as exc:
+                self._once(("estimate", str(exc)), f"estimation failed: {exc}")
+                done = version
+                continue
+            except Exception as exc:  # noqa: BLE001 - log once, go on
+                self._once(("estimate", type(exc).__name__),
+                           f"estimation failed: {type(exc).__name__}: {exc}", "error")
+                done = version
+                continue
+            self.last_estimation_s = round(time.perf_counter() - t0, 3)
+            self.estimations += 1
+            done = version
+            changed = False
+            for d in decisions:
+                r = self.robots[d.robot]
+                if (d.action, d.why) != (r.last_action, r.last_why) or d.action in ("placed", "switched"):
+                    self.log.info(d.line())
+                else:
+                    self.log.debug(d.line())
+                r.last_action, r.last_why = d.action, d.why
+                if d.action in ("placed", "switched"):
+                    changed = True
+                    self._publish_pose(r)
+            if changed:
+                with self._lock:
+                    self._held_version += 1
+                self._wake_compose.set()
+            else:
+                self._publish_status()
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Stop the worker threads (a running estimation is cancelled)."""
+        self._stop.set()
+        self._wake_compose.set()
+        for t in self._threads:
+            t.join(timeout)
+
+
+def _identity():
+    from .. import Transform2D
+    return Transform2D.identity()

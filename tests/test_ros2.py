@@ -1,0 +1,150 @@
+"""The merge node's parts that need no running ROS graph: message conversion with the real
+``nav_msgs`` classes, parameters, topic names, and the hysteresis rule."""
+
+import array
+import math
+
+import numpy as np
+import pytest
+from nav_msgs.msg import OccupancyGrid as GridMsg
+
+import fusionkit as fk
+# the module path: once imported, the submodule shadows the lazy name fk.simulate
+from fusionkit.simulate import SimulationConfig, simulate, write_run
+from fusionkit.ros2._convert import BadMap, fill_msg, grid_from_msg
+from fusionkit.ros2._names import is_robot_map_topic, parent_namespace
+from fusionkit.ros2._params import settings_from
+from fusionkit.ros2._tracker import Tracker
+from fusionkit.ros2.play import find_robots, growth_steps
+
+
+def _grid(rows=30, cols=40, seed=0):
+    rng = np.random.default_rng(seed)
+    data = rng.choice(np.array([-1, 0, 100], np.int8), size=(rows, cols))
+    return fk.OccupancyGrid(data, 0.05, (1.5, -2.0, 0.3), "g")
+
+
+def test_grid_message_round_trip():
+    g = _grid()
+    msg = GridMsg()
+    fill_msg(msg, g, "world", msg.header.stamp)
+    assert (msg.info.width, msg.info.height) == (40, 30)
+    back = grid_from_msg(msg, max_cells=10_000)
+    np.testing.assert_array_equal(back.data, g.data)
+    assert back.resolution == pytest.approx(0.05)
+    np.testing.assert_allclose(back.origin, g.origin, atol=1e-6)
+
+
+@pytest.mark.parametrize("edit, reason", [
+    (lambda m: setattr(m, "data", array.array("b", bytes(50))), "data holds 50 cells but width x height is 40 x 30"),
+    (lambda m: setattr(m.info, "resolution", float("nan")), "resolution nan is not a positive"),
+    (lambda m: setattr(m.info, "resolution", 0.0), "resolution 0.0 is not a positive"),
+    (lambda m: setattr(m.info.origin.position, "x", float("inf")), "is not finite"),
+    (lambda m: (setattr(m.info, "width", 0), setattr(m, "data", array.array("b"))), "empty"),
+])
+def test_malformed_grid_messages_are_refused_with_the_reason(edit, reason):
+    msg = GridMsg()
+    fill_msg(msg, _grid(), "world", msg.header.stamp)
+    edit(msg)
+    with pytest.raises(BadMap) as info:
+        grid_from_msg(msg, max_cells=10_000)
+    assert reason in str(info.value)
+
+
+def test_huge_grid_is_refused_before_it_is_copied():
+    msg = GridMsg()
+    fill_msg(msg, _grid(), "world", msg.header.stamp)
+    with pytest.raises(BadMap, match="more than max_map_cells"):
+        grid_from_msg(msg, max_cells=1000)
+
+
+def test_settings_take_map_merge_defaults_and_init_poses():
+    s = settings_from({})
+    assert (s.robot_map_topic, s.merged_map_topic, s.world_frame, s.robot_namespace) == \
+        ("map", "map", "world", "")
+    assert (s.merging_rate, s.discovery_rate, s.estimation_rate, s.known_init_poses) == \
+        (4.0, 0.05, 0.5, False)
+    s = settings_from({"merging_rate": 2, "known_init_poses": True, "reference_robot": "robot2",
+                       "/robot1/map_merge/init_pose_x": -3.0, "/robot1/map_merge/init_pose_y": 1,
+                       "/robot1/map_merge/init_pose_z": 0.0, "/robot1/map_merge/init_pose_yaw": 0.5})
+    assert s.merging_rate == 2.0 and s.reference_robot == "/robot2"
+    assert s.init_poses["/robot1"].is_close(fk.Transform2D(-3.0, 1.0, 0.5))
+
+
+@pytest.mark.parametrize("values, message", [
+    ({"merging_rate": "fast"}, "parameter merging_rate: expected a number"),
+    ({"estimation_rate": 0.0}, "parameter estimation_rate: expected a rate in Hz"),
+    ({"known_init_poses": 3}, "parameter known_init_poses: expected true or false"),
+    ({"method": "magic"}, "parameter method: 'magic' is not a method"),
+    ({"min_confidence": 1.5}, "parameter min_confidence: expected a number between 0 and 1"),
+    ({"/r1/map_merge/init_pose_x": 1.0}, "give /r1/map_merge/init_pose_y, /r1/map_merge/init_pose_yaw"),
+])
+def test_bad_parameters_say_what_to_fix(values, message):
+    with pytest.raises(fk.InputError) as info:
+        settings_from(values)
+    assert message in str(info.value)
+
+
+def test_robot_map_topics_are_found_as_map_merge_finds_them():
+    kw = dict(robot_map_topic="map", robot_namespace="", merged_topic="/map")
+    grid = ["nav_msgs/msg/OccupancyGrid"]
+    assert is_robot_map_topic("/robot1/map", grid, **kw)
+    assert parent_namespace("/robot1/map") == "/robot1"
+    assert not is_robot_map_topic("/map", grid, **kw)                      # our own output
+    assert not is_robot_map_topic("/robot1/map", ["std_msgs/msg/String"], **kw)
+    assert not is_robot_map_topic("/robot1/map_updates", grid, **kw)
+    assert not is_robot_map_topic("/other/map", grid, **{**kw, "robot_namespace": "tb3"})
+    assert is_robot_map_topic("/tb3_0/map", grid, **{**kw, "robot_namespace": "tb3"})
+
+
+def _tracker():
+    return Tracker(min_confidence=0.5, switch_margin=0.05, switch_confirmations=2)
+
+
+def test_first_confident_estimate_places_a_robot_and_a_close_one_confirms_it():
+    tr = _tracker()
+    assert tr.decide("/r", None, 0.0, "no overlap", 0.1).action == "not placed"
+    assert tr.decide("/r", fk.Transform2D(1, 2, 0.1), 0.3, "", 0.1).action == "not placed"
+    d = tr.decide("/r", fk.Transform2D(1, 2, 0.1), 0.9, "", 0.1)
+    assert d.action == "placed" and "placed at x=1.000 m y=2.000 m" in d.line()
+    d = tr.decide("/r", fk.Transform2D(1.15, 2, 0.1 + math.radians(0.5)), 0.95, "", 0.1)
+    assert d.action == "confirmed" and d.transform == fk.Transform2D(1, 2, 0.1)
+
+
+def test_a_different_estimate_replaces_the_held_one_only_when_confidently_better_twice():
+    tr = _tracker()
+    old, new = fk.Transform2D(1, 2, 0.1), fk.Transform2D(4, 2, 0.1)
+    tr.decide("/r", old, 0.9, "", 0.1)
+    scores = {old: 0.80, new: 0.82}
+    d = tr.decide("/r", new, 0.9, "", 0.1, score=lambda t: scores[t])
+    assert d.action == "kept" and tr.held("/r")[0] == old          # not better by the margin
+    assert tr.decide("/r", None, 0.0, "refused", 0.1).transform == old
+    scores[new] = 0.95
+    d = tr.decide("/r", new, 0.9, "", 0.1, score=lambda t: scores[t])
+    assert d.action == "kept" and "confirmation 1 of 2" in d.why
+    d = tr.decide("/r", new, 0.9, "", 0.1, score=lambda t: scores[t])
+    assert d.action == "switched" and tr.held("/r")[0] == new
+
+
+def test_an_interrupted_run_of_better_estimates_starts_over():
+    tr = _tracker()
+    old, new = fk.Transform2D(0, 0, 0), fk.Transform2D(5, 0, 0)
+    tr.decide("/r", old, 0.9, "", 0.1)
+    better = lambda t: 0.9 if t == new else 0.5  # noqa: E731
+    assert "confirmation 1" in tr.decide("/r", new, 0.9, "", 0.1, score=better).why
+    tr.decide("/r", old, 0.9, "", 0.1)
+    assert "confirmation 1" in tr.decide("/r", new, 0.9, "", 0.1, score=better).why
+
+
+def test_play_finds_a_runs_robots_and_grows_their_maps(tmp_path):
+    sim = simulate(fk.default_world(), SimulationConfig(robots=2, poses=300, seed=3))
+    write_run(sim, tmp_path / "run")
+    robots = find_robots(tmp_path / "run")
+    assert [r.name for r in robots] == ["robot_1", "robot_2"]
+    steps = growth_steps(robots[0], 4)
+    assert len(steps) == 4
+    known = [int(g.known_mask().sum()) for g in steps]
+    assert known == sorted(known) and known[0] < known[-1]
+    np.testing.assert_array_equal(steps[-1].data, fk.load_map(robots[0].map_path).data)
+    with pytest.raises(fk.InputError, match="no robot map"):
+        find_robots(tmp_path)

@@ -1,0 +1,283 @@
+"""The merge node for real: ``fusionkit ros2 play``, the node and a listener in separate
+processes talking ROS 2 over loopback only (a random ``ROS_DOMAIN_ID``, discovery limited to
+localhost), each process stopped by its handle, every wait bounded."""
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+import fusionkit as fk
+# the module path: once imported, the submodule shadows the lazy name fk.simulate
+from fusionkit.simulate import SimulationConfig, simulate, write_run
+
+HERE = Path(__file__).parent
+FUSIONKIT = [sys.executable, "-c", "import sys; from fusionkit.cli import main; sys.exit(main())"]
+MERGE_NODE = [sys.executable, "-m", "fusionkit.ros2", "merge-node"]
+
+BAD_PUBLISHER = textwrap.dedent("""
+    import array, itertools, time
+    import rclpy
+    from nav_msgs.msg import OccupancyGrid
+    from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+    rclpy.init()
+    node = rclpy.create_node("bad_robot")
+    pub = node.create_publisher(OccupancyGrid, "/robot_bad/map", QoSProfile(
+        depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL, reliability=ReliabilityPolicy.RELIABLE))
+    try:
+        for k in itertools.count():
+            msg = OccupancyGrid()
+            msg.info.width, msg.info.height, msg.info.resolution = 100, 80, 0.05
+            msg.data = array.array("b", bytes(8000 if k % 2 else 5000))  # 5000: wrong length
+            if k % 2:
+                msg.info.resolution = float("nan")
+            pub.publish(msg)
+            time.sleep(0.3)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+""")
+
+
+class Processes:
+    """Processes started for one test, each stopped by its handle (SIGINT, then SIGKILL)."""
+
+    def __init__(self, tmp_path):
+        self.tmp = tmp_path
+        self.env = {**os.environ,
+                    # isolation from other ROS graphs on this machine, not a computation: any
+                    # free domain will do
+                    "ROS_DOMAIN_ID": str(random.SystemRandom().randint(1, 101)),
+                    "ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST",
+                    "ROS_LOG_DIR": str(tmp_path / "roslog"),
+                    "PYTHONUNBUFFERED": "1"}
+        self.procs: dict = {}
+        self.codes: dict = {}
+        self.killed = False
+        self.shm_before = set(Path("/dev/shm").glob("fastdds_*"))
+
+    def start(self, name, argv):
+        out = open(self.tmp / f"{name}.log", "w")
+        self.procs[name] = subprocess.Popen(argv, stdout=out, stderr=subprocess.STDOUT,
+                                            env=self.env, cwd=self.tmp)
+        out.close()
+        return self.procs[name]
+
+    def log(self, name) -> str:
+        return (self.tmp / f"{name}.log").read_text()
+
+    def stop(self, name, timeout=20.0) -> int:
+        p = self.procs.pop(name)
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+            try:
+                p.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.killed = True
+                p.kill()
+                p.wait(10)
+        self.codes[name] = p.returncode
+        return p.returncode
+
+    def close(self):
+        for name in list(self.procs):
+            self.stop(name)
+        if self.killed:
+            # Fast DDS removes its shared-memory files on a clean exit; after a kill, remove
+            # the new ones that no running process maps any more
+            mapped = " ".join(_maps(pid) for pid in os.listdir("/proc") if pid.isdigit())
+            for f in set(Path("/dev/shm").glob("fastdds_*")) - self.shm_before:
+                if str(f) not in mapped:
+                    f.unlink(missing_ok=True)
+
+
+def _maps(pid: str) -> str:
+    try:
+        return Path(f"/proc/{pid}/maps").read_text(errors="replace")
+    except OSError:
+        return ""
+
+
+@pytest.fixture
+def procs(tmp_path):
+    p = Processes(tmp_path)
+    yield p
+    p.close()
+
+
+@pytest.fixture(scope="module")
+def run3(tmp_path_factory):
+    sim = simulate(fk.default_world(), SimulationConfig(robots=3, poses=1500, seed=1))
+    out = tmp_path_factory.mktemp("ros2") / "run3"
+    write_run(sim, out)
+    return out
+
+
+def _records(path: Path, kind: str) -> list:
+    if not path.is_file():
+        return []
+    out = []
+    for line in path.read_text().splitlines():
+        try:
+            d = json.loads(line)
+        except ValueError:  # a line being written
+            continue
+        if d["kind"] == kind:
+            out.append(d)
+    return out
+
+
+def _wait(condition, timeout, procs, what):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        value = condition()
+        if value:
+            return value
+        for name, p in procs.procs.items():
+            if p.poll() is not None:
+                pytest.fail(f"{name} exited with {p.returncode} while waiting for {what}:\n"
+                            f"{procs.log(name)[-3000:]}")
+        time.sleep(0.25)
+    pytest.fail(f"timed out after {timeout} s waiting for {what}; node log:\n"
+                f"{procs.log('node')[-3000:] if (procs.tmp / 'node.log').exists() else ''}")
+
+
+def test_node_merges_a_played_run_holds_transforms_and_survives_bad_input(procs, run3, tmp_path):
+    steps = 6
+    probe_out = tmp_path / "probe.jsonl"
+    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
+                          "robot_1", "robot_2", "robot_3", "robot_bad"])
+    procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
+                                      "-p", "estimation_rate:=1.0"])
+    procs.start("bad", [sys.executable, "-c", BAD_PUBLISHER])
+    procs.start("play", FUSIONKIT + ["ros2", "play", str(run3), "--duration", "30",
+                                     "--steps", str(steps)])
+
+    # the malformed robot is refused, once per reason, and its topic vanishing is noticed
+    _wait(lambda: "/robot_bad: map refused: data holds 5000" in procs.log("node"), 60, procs,
+          "the malformed map to be refused")
+    _wait(lambda: "/robot_bad: map refused: resolution nan" in procs.log("node"), 30, procs,
+          "the NaN resolution to be refused")
+    procs.stop("bad")
+    _wait(lambda: "/robot_bad/map has no publisher any more" in procs.log("node"), 30, procs,
+          "the vanished topic to be noticed")
+
+    def final_status():
+        sts = [s["status"] for s in _records(probe_out, "status")]
+        full = [k for k, s in enumerate(sts) if all(
+            s["robots"].get(f"/robot_{i}", {}).get("updates") == steps for i in (1, 2, 3))]
+        # an estimation made on the last maps, after they all arrived
+        return full and sts[-1]["estimations"] > sts[full[0]]["estimations"] and sts[-1]
+
+    status = _wait(final_status, 120, procs, "an estimation on the robots' last maps")
+    assert procs.procs["node"].poll() is None, "the node stopped"
+    assert procs.stop("play") == 0
+    assert procs.stop("node") == 0, procs.log("node")[-3000:]
+    procs.stop("probe")
+    node_log = procs.log("node")
+    assert "Traceback" not in node_log
+
+    # logged once per reason, that robot skipped
+    assert node_log.count("/robot_bad: map refused: data holds 5000") == 1
+    assert node_log.count("/robot_bad: map refused: resolution nan") == 1
+    assert status["robots"]["/robot_bad"]["placed"] is False
+    assert status["robots"]["/robot_bad"]["map"] is None
+
+    truth = {r["name"]: fk.Transform2D.from_dict(r["transform"])
+             for r in json.loads((run3 / "truth.json").read_text())["robots"]}
+    reference = status["reference"].strip("/")   # the first robot whose map arrived
+    assert reference in truth
+
+    # the merged map arrived, in the world frame: the three last maps fused with the published
+    # transforms, covering what they cover with the true transforms
+    maps = _records(probe_out, "map")
+    assert maps and maps[-1]["frame"] == "world"
+    names = [reference] + sorted(set(truth) - {reference})
+    grids = [fk.load_map(run3 / f"{n}.yaml") for n in names]
+    held = [fk.Transform2D.from_dict(status["robots"][f"/{n}"]["transform"]) for n in names]
+    fused = fk.fuse_maps(grids, held).grid
+    assert maps[-1]["known"] == pytest.approx(int(fused.known_mask().sum()), rel=0.01)
+    assert maps[-1]["occupied"] == pytest.approx(int(fused.occupied_mask().sum()), rel=0.01)
+    oracle = fk.fuse_maps(grids, [truth[reference].inverse @ truth[n] for n in names]).grid
+    assert maps[-1]["known"] == pytest.approx(int(oracle.known_mask().sum()), rel=0.02)
+
+    # every published transform matches the truth within 2 cells and 1 degree
+    poses = _records(probe_out, "pose")
+    for name in ("robot_1", "robot_2", "robot_3"):
+        mine = [fk.Transform2D(p["x"], p["y"], p["theta"]) for p in poses if p["robot"] == name]
+        assert mine, f"no transform published for {name}"
+        expected = truth[reference].inverse @ truth[name]
+        for t in mine:
+            dist, ang = t.error_to(expected)
+            assert dist <= 2 * 0.1 and ang <= 0.0175, (name, t, expected)
+        assert all(p["frame"] == "world" for p in poses if p["robot"] == name)
+
+    # placed once, the transform stays while the map grows
+    for name in {"/robot_1", "/robot_2", "/robot_3"} - {status["reference"]}:
+        seen = [(s["status"]["robots"][name]["updates"], s["status"]["robots"][name]["transform"])
+                for s in _records(probe_out, "status")
+                if s["status"]["robots"].get(name, {}).get("placed")]
+        assert seen, f"{name} was never placed"
+        assert seen[0][0] < steps, f"{name} was placed only on its last map; nothing to hold"
+        assert {json.dumps(t, sort_keys=True) for _, t in seen} == {json.dumps(seen[0][1], sort_keys=True)}
+        assert "switched" not in node_log
+
+
+def test_known_init_poses_from_a_map_merge_params_file(procs, run3, tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text(textwrap.dedent("""\
+        map_merge:
+          ros__parameters:
+            merging_rate: 4.0
+            discovery_rate: 2.0
+            known_init_poses: true
+            world_frame: site
+            /robot_1/map_merge/init_pose_x: 0.0
+            /robot_1/map_merge/init_pose_y: 0.0
+            /robot_1/map_merge/init_pose_z: 0.0
+            /robot_1/map_merge/init_pose_yaw: 0.0
+            /robot_2/map_merge/init_pose_x: -3.0
+            /robot_2/map_merge/init_pose_y: 1.0
+            /robot_2/map_merge/init_pose_z: 0.0
+            /robot_2/map_merge/init_pose_yaw: 1.5
+        """))
+    probe_out = tmp_path / "probe.jsonl"
+    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
+                          "robot_1", "robot_2", "robot_3"])
+    procs.start("node", FUSIONKIT + ["ros2", "merge-node", "--params-file", str(params)])
+    procs.start("play", FUSIONKIT + ["ros2", "play", str(run3), "--duration", "0", "--steps", "1"])
+    _wait(lambda: {p["robot"] for p in _records(probe_out, "pose")} >= {"robot_1", "robot_2"}
+          and _records(probe_out, "map"), 60, procs, "the known poses and the merged map")
+    _wait(lambda: "/robot_3: no known initial pose" in procs.log("node"), 30, procs,
+          "robot_3 to be skipped")
+    assert procs.stop("node") == 0
+    poses = {p["robot"]: p for p in _records(probe_out, "pose")}
+    assert (poses["robot_2"]["x"], poses["robot_2"]["y"]) == (-3.0, 1.0)
+    assert poses["robot_2"]["theta"] == pytest.approx(1.5)
+    assert poses["robot_2"]["frame"] == "site" and "robot_3" not in poses
+    assert _records(probe_out, "map")[-1]["frame"] == "site"
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["merge-node", "--ros-args", "-p", "merging_rate:=fast"], "parameter merging_rate: expected a number"),
+    (["merge-node", "--ros-args", "-p", "method:=magic"], "parameter method: 'magic' is not a method"),
+    (["merge-node", "--params-file", "missing.yaml"], "missing.yaml: parameter file not found"),
+    (["merge-node", "--params-file", "broken.yaml"], "Couldn't parse params file"),
+    (["merge-node", "--ros-args", "-p"], "ROS arguments '--ros-args -p' not understood"),
+    (["play", "nowhere"], "nowhere: not a directory"),
+])
+def test_bad_input_is_one_line_and_exit_2(procs, argv, message):
+    (procs.tmp / "broken.yaml").write_text("map_merge:\n  ros__parameters:\n    merging_rate: [1,\n")
+    p = procs.start("cmd", FUSIONKIT + ["ros2", *argv])
+    assert p.wait(60) == 2
+    out = procs.log("cmd").strip().splitlines()
+    assert len(out) == 1 and message in out[0], out
