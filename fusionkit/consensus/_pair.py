@@ -105,6 +105,10 @@ class ConsensusConfig:
     threads : int
         Threads that prepare the maps and estimate the pairs (0: one per core). One by
         default: the pairs of most cases are too quick for threads to pay (BENCHMARKS.md).
+    candidates : int
+        Each map's best-ranked others (by a cheap signature, :mod:`fusionkit.candidates`) that
+        get a full estimate, plus the pairs that close loops; 0: every pair. A fleet of at most
+        ``candidates + 1`` maps has every pair estimated.
     """
 
     accept: float = 0.9
@@ -139,6 +143,7 @@ class ConsensusConfig:
     final_check: bool = True
     pose_graph: bool = True
     threads: int = 1
+    candidates: int = 6
 
     def __post_init__(self):
         if not 0.0 < self.accept <= 1.0:
@@ -147,10 +152,10 @@ class ConsensusConfig:
             raise InputError("max_conflict and margin are fractions in [0, 1], rival in (0, 1]")
         for name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters", "rotation_peaks",
                      "translations", "refine_top", "max_poses", "max_refine_points", "coarse_points",
-                     "pso_top", "alias_peaks", "coarse_side", "threads"):
+                     "pso_top", "alias_peaks", "coarse_side", "threads", "candidates"):
             v = getattr(self, name)
             least = 0 if name in ("min_overlap_cells", "min_agreement_cells", "scan_clusters",
-                                  "alias_peaks", "threads") else 1
+                                  "alias_peaks", "threads", "candidates") else 1
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
                 raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
         if not 0.0 <= self.min_overlap_fraction <= 1.0:
