@@ -39,7 +39,7 @@ from fusionkit.transform import Transform2D
 from fusionkit.worlds import make_world
 
 #: World area per robot (m^2); the cave is 4:3.
-AREA_PER_ROBOT = 120.0
+AREA_PER_ROBOT = 500.0
 
 
 def world_for(k: int, area_per_robot: float) -> tuple[float, float]:
@@ -125,8 +125,8 @@ def main(argv=None) -> int:
     ap.add_argument("--area-per-robot", type=float, default=AREA_PER_ROBOT)
     ap.add_argument("--exhaustive-max", type=int, default=50,
                     help="run the every-pair merge only up to this K (default 50)")
-    ap.add_argument("--top", type=int, default=ConsensusConfig().candidates,
-                    help="candidates per map (default: the method's)")
+    ap.add_argument("--top", type=int, nargs="+", default=[ConsensusConfig().candidates],
+                    help="candidates per map, one merge per value (default: the method's)")
     ap.add_argument("--backend", default=None, choices=("inprocess", "processes", "dask"))
     ap.add_argument("--workers", type=int, default=None)
     ap.add_argument("--cache", default="/tmp/fusionkit_fleets")
@@ -141,7 +141,7 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             grids, scans, truth, size = make_fleet(k, args.poses, args.seed, args.area_per_robot, cache)
             sim_s = time.perf_counter() - t0
-            modes = [("candidates", args.top)]
+            modes = [(f"top {top}", top) for top in args.top]
             if k <= args.exhaustive_max:
                 modes.insert(0, ("every-pair", 0))
             for mode, top in modes:
@@ -155,18 +155,19 @@ def main(argv=None) -> int:
                       f"{status.count('wrong'):>5} {peak_mb():8.0f}  cave {size[0]:g}x{size[1]:g} m "
                       f"(fleet made in {sim_s:.0f} s); " + ", ".join(f"{s} {v:.1f}" for s, v in res.seconds.items()),
                       flush=True)
-            if (k, "every-pair") in rows:
+            for top in args.top if (k, "every-pair") in rows else ():
                 ex_ok = {m for m, s in enumerate(rows[(k, "every-pair")][1]) if s == "ok"}
-                ca_ok = {m for m, s in enumerate(rows[(k, "candidates")][1]) if s == "ok"}
+                ca_ok = {m for m, s in enumerate(rows[(k, f"top {top}")][1]) if s == "ok"}
                 lost = sorted(ex_ok - ca_ok)
-                print(f"{k:>4} same placements: {'yes' if not lost else 'no'}; placed correctly by every-pair "
-                      f"only: {lost or 'none'}; by candidates only: {sorted(ca_ok - ex_ok) or 'none'}",
-                      flush=True)
-    ks = [k for k in args.k if (k, "candidates") in rows]
-    for a, b in zip(ks, ks[1:]):
-        ra, rb = rows[(a, "candidates")][0], rows[(b, "candidates")][0]
-        print(f"candidates: K {a} -> {b}: time x{rb / ra:.2f}, pairs x"
-              f"{len(rows[(b, 'candidates')][2].steps) / len(rows[(a, 'candidates')][2].steps):.2f}")
+                print(f"{k:>4} top {top}: same correct placements as every-pair: "
+                      f"{'yes' if ex_ok == ca_ok else 'no'}; lost: {lost or 'none'}; "
+                      f"gained: {sorted(ca_ok - ex_ok) or 'none'}", flush=True)
+    for top in args.top:
+        ks = [k for k in args.k if (k, f"top {top}") in rows]
+        for a, b in zip(ks, ks[1:]):
+            ra, rb = rows[(a, f"top {top}")], rows[(b, f"top {top}")]
+            print(f"top {top}: K {a} -> {b}: time x{rb[0] / ra[0]:.2f}, pairs x"
+                  f"{len(rb[2].steps) / len(ra[2].steps):.2f}")
     return 0
 
 

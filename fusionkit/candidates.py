@@ -32,12 +32,14 @@ import numpy as np
 from .errors import InputError
 
 __all__ = ["map_signature", "signature_scores", "fleet_scores", "candidate_pairs", "closing_pairs",
-           "estimate_fleet", "rank_partners"]
+           "estimate_fleet", "rank_partners", "boxes_apart"]
 
 #: Spectra pooled into a map's signature.
-DEFAULT_SAMPLES = 48
-#: Share of a map's samples (the best-matching) that its score averages.
-BEST_SHARE = 0.25
+DEFAULT_SAMPLES = 128
+#: Signature rows of each map that vote (:func:`signature_scores`).
+DEFAULT_QUERIES = 48
+#: Closest rows each query votes for.
+DEFAULT_VOTES = 3
 #: Coefficients of the wall-direction spectrum used when a map has no scans.
 HIST_COEFFS = 24
 
@@ -76,36 +78,39 @@ def _hist_signature(hist: np.ndarray) -> np.ndarray:
     return (mag / nrm if nrm > 0 else mag).astype(np.float32)[None, :]
 
 
-def signature_scores(signatures: Sequence[np.ndarray]) -> np.ndarray:
+def signature_scores(signatures: Sequence[np.ndarray], *, queries: int = DEFAULT_QUERIES,
+                     votes: int = DEFAULT_VOTES) -> np.ndarray:
     """Symmetric ``(K, K)`` similarity of the maps' signatures (diagonal ``-inf``).
 
-    Each row of a signature is a unit vector; for maps ``a`` and ``b`` the best rho of each of
-    a's rows against b's rows is taken, the best :data:`BEST_SHARE` of those averaged, and the
-    two directions averaged. A map with an empty signature scores ``-1`` against every map.
+    Place recognition by votes: ``queries`` rows of each map's signature (spread over it) look
+    for their ``votes`` most similar rows (largest rho) among every *other* map's signature
+    rows, and each map owning one of those gets a vote (one per query at most). The score of a
+    pair is the votes each gave the other. A raw similarity saturates (any map holds some scan
+    much like any other); a vote only goes to the maps that hold the *closest* scans, which
+    are the maps that saw the same place.
     """
     k = len(signatures)
     sigs = [np.asarray(s, dtype=np.float32) for s in signatures]
     widths = {s.shape[1] for s in sigs if s.size}
     if len(widths) > 1:
         raise InputError("signatures of different widths cannot be compared; build them alike")
-    scores = np.full((k, k), -1.0)
-    rows = [s for s in sigs if s.size]
-    if not rows:
-        np.fill_diagonal(scores, -np.inf)
-        return scores
-    stacked = np.concatenate(rows)
-    starts = np.r_[0, np.cumsum([len(s) for s in sigs if s.size])]
+    if queries < 1 or votes < 1:
+        raise InputError(f"queries and votes must be >= 1, got {queries} and {votes}")
+    scores = np.zeros((k, k))
     present = [m for m, s in enumerate(sigs) if s.size]
-    best = np.full((k, k), np.nan)
-    for a in present:
-        rho = sigs[a] @ stacked.T                                    # (S_a, total)
-        # best rho of each of a's rows in each other map: a max over that map's block of columns
-        per_map = np.maximum.reduceat(rho, starts[:-1], axis=1)      # (S_a, present)
-        take = max(1, int(np.ceil(BEST_SHARE * len(rho))))
-        top = -np.sort(-per_map, axis=0)[:take]
-        best[a, present] = top.mean(axis=0)
-    for a, b in itertools.combinations(present, 2):
-        scores[a, b] = scores[b, a] = 0.5 * (best[a, b] + best[b, a])
+    if len(present) > 1:
+        stacked = np.concatenate([sigs[m] for m in present])
+        owner = np.concatenate([np.full(len(sigs[m]), m) for m in present])
+        for a in present:
+            q = sigs[a][_spread(len(sigs[a]), queries)]
+            rho = q @ stacked.T                                     # (queries, all rows)
+            rho[:, owner == a] = -np.inf
+            v = min(votes, int((owner != a).sum()))
+            best = np.argpartition(-rho, v - 1, axis=1)[:, :v]      # the v closest rows
+            voted = np.zeros((len(q), k), bool)
+            voted[np.arange(len(q))[:, None], owner[best]] = True  # one vote per map a query
+            scores[a] += voted.sum(axis=0)
+    scores = scores + scores.T
     np.fill_diagonal(scores, -np.inf)
     return scores
 
@@ -240,3 +245,19 @@ def estimate_fleet(estimate: Callable[[list], dict], indexes: Sequence, hists: S
     if close:
         pairs.update(estimate(close))
     return dict(sorted(pairs.items()))
+
+
+def boxes_apart(box_a: np.ndarray, box_b: np.ndarray, t_ba, margin: float) -> bool:
+    """Whether map b, placed in map a's frame by ``t_ba``, certainly does not overlap map a.
+
+    ``box_a``, ``box_b``: the corners (m, own frames) of each map's known area
+    (:func:`fusionkit.consensus._pair.corners`); ``margin`` (m) widens both boxes. Two maps whose
+    boxes are apart share no cell, so no check between them can find a disagreement: a large
+    fleet's cross checks are then about linear in its size instead of quadratic.
+    """
+    pb = t_ba(np.asarray(box_b, dtype=np.float64))
+    pa = np.asarray(box_a, dtype=np.float64)
+    return bool(pb[:, 0].min() - margin > pa[:, 0].max() + margin
+                or pb[:, 0].max() + margin < pa[:, 0].min() - margin
+                or pb[:, 1].min() - margin > pa[:, 1].max() + margin
+                or pb[:, 1].max() + margin < pa[:, 1].min() - margin)

@@ -223,6 +223,7 @@ class DaskExecutor(Executor):
                              "pip install 'fusionkit[dask]'") from None
         self._cluster = None
         self._client = None
+        self._dashboard = False
         if address is not None:
             if not isinstance(address, str) or "://" not in address:
                 raise InputError(f"scheduler address {address!r}: give it as tcp://HOST:PORT")
@@ -232,23 +233,32 @@ class DaskExecutor(Executor):
                 raise InputError(f"no Dask scheduler answered at {address} within {timeout:g} s "
                                  f"({type(exc).__name__}); check the address and that the "
                                  f"scheduler is running") from None
+            try:
+                self._client.wait_for_workers(1, timeout=float(timeout))
+            except (OSError, TimeoutError):
+                self.close()
+                raise InputError(f"the Dask scheduler at {address} has no workers (waited "
+                                 f"{timeout:g} s); start some with dask worker {address}") from None
             self.workers = max(1, sum(w.get("nthreads", 1) for w in
                                       self._client.scheduler_info().get("workers", {}).values()))
+            self._dashboard = True
         else:
             if not isinstance(workers, int) or workers < 1:
                 raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
             self.workers = workers
-            dash = None
             if dashboard:
                 try:
                     import bokeh  # noqa: F401
-                    dash = "127.0.0.1:0"
                 except ImportError:
-                    dash = None
+                    dashboard = False
+            # everything on the loopback interface, on free ports (the scheduler's small HTTP
+            # server too, which serves the dashboard when asked for and bokeh is installed)
             self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                         host="127.0.0.1", dashboard_address=dash,
-                                         worker_dashboard_address=None)
+                                         host="127.0.0.1", dashboard_address="127.0.0.1:0",
+                                         worker_dashboard_address=None,
+                                         scheduler_kwargs={"dashboard": bool(dashboard)})
             self._client = Client(self._cluster, set_as_default=False)
+            self._dashboard = bool(dashboard)
 
     @property
     def client(self):
@@ -257,14 +267,11 @@ class DaskExecutor(Executor):
 
     @property
     def dashboard(self) -> str | None:
-        if self._client is None:
+        if self._client is None or not self._dashboard:
             return None
-        try:
-            import bokeh  # noqa: F401
-        except ImportError:
-            return None
-        link = self._client.dashboard_link
-        return link or None
+        if "dashboard" not in self._client.scheduler_info().get("services", {}):
+            return None                                   # bokeh is not installed there
+        return self._client.dashboard_link or None
 
     def describe(self) -> str:
         where = self._client.scheduler.address if self._client is not None else "closed"
@@ -288,7 +295,7 @@ class DaskExecutor(Executor):
         out: list = [None] * total
         done = 0
         try:
-            for f in as_completed(futures):
+            for f in as_completed(futures, loop=client.loop):
                 out[index[f.key]] = f.result()
                 done += 1
                 if progress is not None:

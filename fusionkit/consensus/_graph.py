@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..candidates import boxes_apart
 from ..transform import Transform2D
 from ._pair import ConsensusConfig, _plausible, displacement
 from ._verify import refine_icp, verify
@@ -241,6 +242,8 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                 if parent[b] == a or parent[a] == b:
                     continue
                 t_ba = transforms[a].inverse @ transforms[b]
+                if cfg.min_overlap_cells > 0 and boxes_apart(boxes[a], boxes[b], t_ba, 3 * res):
+                    continue                               # no common cell: nothing to disagree on
                 chk = _cross_check(indexes[a], indexes[b], t_ba, cfg, boxes[b], tol)
                 if chk is not None and (worst is None or chk.score < worst[0]):
                     worst = (chk.score, a, b)
