@@ -15,7 +15,10 @@ Fleets are simulated in batches of at most 50 robots (each batch its own seed) a
 Run (the machine's cores may be shared: compare ratios within one run)::
 
     NUMBA_THREADING_LAYER=threadsafe .venv/bin/python benchmarks/bench_fleet.py \
-        [--k 5 10 20 50 100] [--exhaustive-max 50] [--poses 1500] [--workers N --backend dask]
+        [--k 5 10 20 50 100] [--exhaustive-max 50] [--top 4 6] [--workers N --backend dask]
+
+With ``--backend dask`` the peak resident memory of each worker is printed too (each holds the
+fleet's prepared maps once, scattered to it, whatever the number of pair tasks).
 """
 
 from __future__ import annotations
@@ -117,6 +120,15 @@ def peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
+def worker_peaks(ex) -> str:
+    """Peak resident memory of each Dask worker process (MB), or "" on other back ends."""
+    client = getattr(ex, "client", None)
+    if client is None:
+        return ""
+    peaks = client.run(peak_mb)
+    return "; workers' peak MB: " + ", ".join(f"{v:.0f}" for v in peaks.values())
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--k", nargs="+", type=int, default=[5, 10, 20, 50, 100])
@@ -153,8 +165,8 @@ def main(argv=None) -> int:
                 rows[(k, mode)] = (secs, status, res)
                 print(f"{k:>4} {mode:<11} {secs:8.1f} {len(res.steps):>6} {status.count('ok') + status.count('wrong'):>6} "
                       f"{status.count('wrong'):>5} {peak_mb():8.0f}  cave {size[0]:g}x{size[1]:g} m "
-                      f"(fleet made in {sim_s:.0f} s); " + ", ".join(f"{s} {v:.1f}" for s, v in res.seconds.items()),
-                      flush=True)
+                      f"(fleet made in {sim_s:.0f} s); " + ", ".join(f"{s} {v:.1f}" for s, v in res.seconds.items())
+                      + worker_peaks(ex), flush=True)
             for top in args.top if (k, "every-pair") in rows else ():
                 ex_ok = {m for m, s in enumerate(rows[(k, "every-pair")][1]) if s == "ok"}
                 ca_ok = {m for m, s in enumerate(rows[(k, f"top {top}")][1]) if s == "ok"}
