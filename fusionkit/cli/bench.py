@@ -112,7 +112,7 @@ def run(args) -> int:
             progress.note(executor.describe())
         result = run_bench(worlds, config, skipped=skipped, command=command, executor=executor,
                            progress=lambda done, total, label: progress(done, total, label))
-    progress.close()
+        progress.close()
     summary = summarize(result)
     paths = write_outputs(result, out, summary)
     if not args.quiet:

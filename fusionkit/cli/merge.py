@@ -73,10 +73,16 @@ def run(args) -> int:
     progress = Progress("merging", enabled=None if not args.quiet else False)
     pairs_bar = ProgressBar("merge", unit="pairs", enabled=None if not args.quiet else False)
 
+    last: list = []
+
     def callback(ev):
         if config.method == "consensus":
             if ev.stage == "align":                        # the pairs: the long part
                 pairs_bar(ev.step, ev.total)
+                last[:] = [ev.total]
+            elif last:                                     # the pairs are done
+                pairs_bar(last[0], last[0])
+                last.clear()
         elif ev.stage == "align" and ev.pso is not None:
             progress(ev.step, ev.total, f"{ev.label} it {ev.pso.iteration}")
         elif ev.stage != "align":
@@ -86,8 +92,8 @@ def run(args) -> int:
         if not args.quiet and executor.name != "inprocess":
             pairs_bar.note(executor.describe())
         result: MergeResult = merge(inputs, config=config, callback=callback)
-    pairs_bar.close()
-    progress.close()
+        pairs_bar.close()
+        progress.close()
     save_map(result.grid, out, inputs=inputs)
     report = result.report(inputs, output=str(args.output))
     write_text_atomic(report_path, json.dumps(report, indent=2) + "\n")

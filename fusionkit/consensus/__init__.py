@@ -206,8 +206,9 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
 
         def estimate(todo, exhaustive=False):
             def progress(done, total):
-                if callback is not None and total:
-                    callback("align", done, total, todo[min(done, total - 1)])
+                # as before: step = pairs finished, pair = the next one in order
+                if callback is not None and done < total:
+                    callback("align", done, total, todo[done])
             tasks = [(i, j, seed, exhaustive) for i, j in todo]
             return dict(zip(todo, ex.map(_pair_task, tasks, shared=shared, progress=progress)))
 
