@@ -5,7 +5,8 @@ robot overlaps about as many others whatever K), each robot's map and scans in i
 The default method merges the fleet twice: with every pair estimated (``candidates=0``) and with
 candidate pairs (the default). Printed per K and mode: merge wall time (prepare, pairs, graph,
 fuse included), pairs estimated, maps placed, wrong placements (rotation error >= 2 deg or
-known-cell centroid >= 3 cells from the truth), and the peak resident memory of this process.
+known-cell centroid >= 3 cells from the truth), the CPU time of this process during the merge,
+and the peak resident memory of this process so far (a fleet simulated in this run counts).
 Then, for each K where both ran, whether every map the exhaustive merge placed correctly is
 placed correctly with candidates too.
 
@@ -36,6 +37,7 @@ from fusionkit.consensus import ConsensusConfig
 from fusionkit.executor import make_executor, using
 from fusionkit.grid import OccupancyGrid
 from fusionkit.pipeline import MergeConfig, merge
+from fusionkit.resample import canvas_for, resample
 from fusionkit.scanlog import ScanLog
 from fusionkit.simulate import SimulationConfig, simulate
 from fusionkit.transform import Transform2D
@@ -116,6 +118,18 @@ def score(grids, truth, transforms) -> list[str]:
     return out
 
 
+def best_overlap(grids, truth, m: int) -> float:
+    """Largest share of map ``m``'s known cells (in the world) that another map also knows."""
+    canvas = canvas_for([grids[m]], [truth[m]], grids[m].resolution)
+    mine = resample(grids[m], truth[m], canvas).known_mask()
+    total = max(int(mine.sum()), 1)
+    best = 0.0
+    for k, (g, t) in enumerate(zip(grids, truth)):
+        if k != m:
+            best = max(best, float((resample(g, t, canvas).known_mask() & mine).sum()) / total)
+    return best
+
+
 def peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
@@ -144,7 +158,8 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default="/tmp/fusionkit_fleets")
     args = ap.parse_args(argv)
     cache = Path(args.cache)
-    print(f"{'K':>4} {'mode':<11} {'seconds':>8} {'pairs':>6} {'placed':>6} {'wrong':>5} {'peak MB':>8}  world")
+    print(f"{'K':>4} {'mode':<11} {'seconds':>8} {'CPU s':>7} {'pairs':>6} {'placed':>6} {'wrong':>5} "
+          f"{'peak MB':>8}  world")
     rows = {}
     with make_executor(args.backend, workers=args.workers) as ex, using(ex):
         if args.backend is not None:
@@ -158,15 +173,20 @@ def main(argv=None) -> int:
                 modes.insert(0, ("every-pair", 0))
             for mode, top in modes:
                 cfg = MergeConfig(seed=0, consensus=ConsensusConfig(candidates=top))
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 res = merge(grids, scans=scans, config=cfg)
-                secs = time.perf_counter() - t0
+                secs, cpu = time.perf_counter() - t0, time.process_time() - c0
                 status = score(grids, truth, res.transforms)
                 rows[(k, mode)] = (secs, status, res)
-                print(f"{k:>4} {mode:<11} {secs:8.1f} {len(res.steps):>6} {status.count('ok') + status.count('wrong'):>6} "
+                print(f"{k:>4} {mode:<11} {secs:8.1f} {cpu:7.1f} {len(res.steps):>6} {status.count('ok') + status.count('wrong'):>6} "
                       f"{status.count('wrong'):>5} {peak_mb():8.0f}  cave {size[0]:g}x{size[1]:g} m "
                       f"(fleet made in {sim_s:.0f} s); " + ", ".join(f"{s} {v:.1f}" for s, v in res.seconds.items())
                       + worker_peaks(ex), flush=True)
+                left = [m for m, st in enumerate(status) if st == "left"]
+                if left:
+                    print(f"{k:>4} left out: " + ", ".join(
+                        f"robot_{m + 1} (largest true overlap with another map {best_overlap(grids, truth, m):.2f})"
+                        for m in left), flush=True)
             for top in args.top if (k, "every-pair") in rows else ():
                 ex_ok = {m for m, s in enumerate(rows[(k, "every-pair")][1]) if s == "ok"}
                 ca_ok = {m for m, s in enumerate(rows[(k, f"top {top}")][1]) if s == "ok"}

@@ -143,7 +143,7 @@ class ConsensusConfig:
     final_check: bool = True
     pose_graph: bool = True
     threads: int = 1
-    candidates: int = 6
+    candidates: int = 4
 
     def __post_init__(self):
         if not 0.0 < self.accept <= 1.0:
