@@ -216,7 +216,8 @@ def estimate_fleet(estimate: Callable[[list], dict], indexes: Sequence, hists: S
 
     1. each map's ``top`` best-scored others and a maximum spanning tree of the scores
        (:func:`candidate_pairs`);
-    2. a map with no accepted or ambiguous pair then: its next ``top`` candidates;
+    2. a map with no accepted or ambiguous pair then: its next ``top`` candidates; one still
+       without: every pair of it (the cost grows with the number of such maps times ``K``);
     3. the pairs that close a triangle around each accepted pair in none (:func:`closing_pairs`).
 
     Returns the results sorted by pair.
@@ -240,6 +241,12 @@ def estimate_fleet(estimate: Callable[[list], dict], indexes: Sequence, hists: S
                     more.add(e)
     if more:
         pairs.update(estimate(sorted(more)))
+    # a map still without a link: every pair of it (its scans may look like no other map's
+    # while its walls fit), so that no map the exhaustive search would place is lost
+    rest = {(min(k, j), max(k, j)) for k in range(n) if not linked(k) for j in range(n) if j != k}
+    rest -= set(pairs)
+    if rest:
+        pairs.update(estimate(sorted(rest)))
     accepted = [e for e, p in pairs.items() if p.accepted]
     close = closing_pairs(accepted, pairs, scores)
     if close:

@@ -159,3 +159,22 @@ def test_boxes_apart_only_when_the_maps_share_no_cell(sessions):
             assert verify(a, b, t).overlap == 0
     assert apart > 5
     assert not boxes_apart(corners(a), corners(b), Transform2D.identity(), 3 * res)
+
+
+def test_a_map_its_signature_misranks_still_gets_every_pair(monkeypatch):
+    # the last map's only real partner, map 0, is the one it scores lowest
+    n = 30
+    s = np.ones((n, n))
+    for k in range(n - 2):                      # the chain 0 - 1 - ... - (n - 2) ranks itself
+        s[k, k + 1] = s[k + 1, k] = 2.0
+    s[n - 1, 0] = s[0, n - 1] = 0.0
+    np.fill_diagonal(s, -np.inf)
+    monkeypatch.setattr("fusionkit.candidates.fleet_scores", lambda indexes, hists=None, **kw: s)
+
+    def estimate(todo):
+        return {(i, j): SimpleNamespace(accepted=(i, j) == (0, n - 1) or j - i == 1 and j < n - 1,
+                                        ambiguous=False) for i, j in todo}
+
+    pairs = estimate_fleet(estimate, list(range(n)), None, 2)
+    assert (0, n - 1) in pairs and pairs[(0, n - 1)].accepted
+    assert len(pairs) < n * (n - 1) // 4
