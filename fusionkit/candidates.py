@@ -216,8 +216,8 @@ def estimate_fleet(estimate: Callable[[list], dict], indexes: Sequence, hists: S
 
     1. each map's ``top`` best-scored others and a maximum spanning tree of the scores
        (:func:`candidate_pairs`);
-    2. a map with no accepted or ambiguous pair then: its next ``top`` candidates; one still
-       without: every pair of it (the cost grows with the number of such maps times ``K``);
+    2. a map with no accepted or ambiguous pair then: its next ``top`` candidates, then the
+       next ``2 top``, ``4 top``, ... until it links or all its pairs are estimated;
     3. the pairs that close a triangle around each accepted pair in none (:func:`closing_pairs`).
 
     Returns the results sorted by pair.
@@ -232,21 +232,23 @@ def estimate_fleet(estimate: Callable[[list], dict], indexes: Sequence, hists: S
     def linked(k):
         return any(k in e and (p.accepted or p.ambiguous) for e, p in pairs.items())
 
-    more = set()
-    for k in range(n):
-        if not linked(k):
-            for j in rank_partners(scores, k)[top:2 * top]:
+    # a map without a link: its next candidates, twice as many each round, until it links or
+    # every pair of it is estimated (its scans may look like no other map's while its walls
+    # fit), so that no map the exhaustive search would place is lost
+    lo = top
+    while lo < n - 1:
+        alone = [k for k in range(n) if not linked(k)]
+        if not alone:
+            break
+        more = set()
+        for k in alone:
+            for j in rank_partners(scores, k)[lo:2 * lo]:
                 e = (min(k, int(j)), max(k, int(j)))
                 if e not in pairs:
                     more.add(e)
-    if more:
-        pairs.update(estimate(sorted(more)))
-    # a map still without a link: every pair of it (its scans may look like no other map's
-    # while its walls fit), so that no map the exhaustive search would place is lost
-    rest = {(min(k, j), max(k, j)) for k in range(n) if not linked(k) for j in range(n) if j != k}
-    rest -= set(pairs)
-    if rest:
-        pairs.update(estimate(sorted(rest)))
+        if more:
+            pairs.update(estimate(sorted(more)))
+        lo *= 2
     accepted = [e for e, p in pairs.items() if p.accepted]
     close = closing_pairs(accepted, pairs, scores)
     if close:
