@@ -7,8 +7,8 @@ Used to check that the cases give the same results on every back end::
     .venv/bin/python benchmarks/compare_bench.py /tmp/b_local/bench.json /tmp/b_dask/bench.json
 
 Prints whether every case's figures (placements, errors, Table 1 metrics, summary) agree
-exactly once wall times are removed, the first difference if not, and the ratio of the two
-runs' wall times. Exit status 0 when identical, 1 otherwise.
+exactly once wall times are removed, whether the summary tables do, the first ten differences,
+and the ratio of the two runs' wall times. Exit status 0 when identical, 1 otherwise.
 """
 
 from __future__ import annotations
@@ -30,26 +30,23 @@ def strip(doc: dict) -> dict:
     return {"cases": clean(doc["cases"]), "summary": clean(doc["summary"]), "config": doc["config"]}
 
 
-def first_difference(a, b, path="") -> str | None:
+def differences(a, b, path="") -> list[str]:
+    """Every place where ``a`` and ``b`` differ, as ``path: value vs value``."""
     if type(a) is not type(b):
-        return f"{path}: {a!r} vs {b!r}"
+        return [f"{path}: {a!r} vs {b!r}"]
     if isinstance(a, dict):
+        out = []
         for k in sorted(set(a) | set(b)):
             if k not in a or k not in b:
-                return f"{path}/{k}: only in one run"
-            d = first_difference(a[k], b[k], f"{path}/{k}")
-            if d:
-                return d
-        return None
+                out.append(f"{path}/{k}: only in one run")
+            else:
+                out += differences(a[k], b[k], f"{path}/{k}")
+        return out
     if isinstance(a, list):
         if len(a) != len(b):
-            return f"{path}: {len(a)} vs {len(b)} items"
-        for n, (x, y) in enumerate(zip(a, b)):
-            d = first_difference(x, y, f"{path}[{n}]")
-            if d:
-                return d
-        return None
-    return None if a == b else f"{path}: {a!r} vs {b!r}"
+            return [f"{path}: {len(a)} vs {len(b)} items"]
+        return [d for n, (x, y) in enumerate(zip(a, b)) for d in differences(x, y, f"{path}[{n}]")]
+    return [] if a == b else [f"{path}: {a!r} vs {b!r}"]
 
 
 def main(argv=None) -> int:
@@ -58,12 +55,16 @@ def main(argv=None) -> int:
         print("usage: compare_bench.py A/bench.json B/bench.json", file=sys.stderr)
         return 2
     a, b = (json.load(open(p)) for p in argv)
-    diff = first_difference(strip(a), strip(b))
+    sa, sb = strip(a), strip(b)
+    diffs = differences(sa, sb)
     print(f"cases: {len(a['cases'])} vs {len(b['cases'])}; identical (timings aside): "
-          f"{'yes' if diff is None else 'no, first difference at ' + diff}")
+          f"{'yes' if not diffs else f'no, {len(diffs)} values differ'}; summary tables identical: "
+          f"{'yes' if sa['summary'] == sb['summary'] else 'no'}")
+    for d in diffs[:10]:
+        print("  " + d)
     print(f"wall time: {a['seconds']:.1f} s vs {b['seconds']:.1f} s; "
           f"second / first = {b['seconds'] / a['seconds']:.2f}")
-    return 0 if diff is None else 1
+    return 0 if not diffs else 1
 
 
 if __name__ == "__main__":
