@@ -163,7 +163,8 @@ def _process_call(fn, token, task):
 class LocalProcesses(Executor):
     """A pool of ``workers`` fresh interpreters (``spawn``: forking a process whose numba
     kernels started threads is unsafe). ``shared`` is sent to each worker once, when the pool
-    for that :meth:`map` starts."""
+    starts; the pool serves every :meth:`map` with the same ``shared`` object until
+    :meth:`close`."""
 
     name = "processes"
 
@@ -172,15 +173,29 @@ class LocalProcesses(Executor):
             raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
         self.workers = workers
         self._token = 0
+        self._pool = None
+        self._pool_shared = None
 
     def map(self, fn, tasks, *, shared=None, progress=None):
         tasks = list(tasks)
-        self._token += 1
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(self.workers, max(1, len(tasks))), mp_context=ctx,
-                                 initializer=_process_init, initargs=(self._token, shared)) as pool:
-            return _ordered(lambda t: pool.submit(_process_call, fn, self._token, t), tasks,
-                            progress, self.workers)
+        if self._pool is None or self._pool_shared is not shared:
+            # a pool per shared data: its workers received it once, when they started
+            self.close()
+            self._token += 1
+            ctx = multiprocessing.get_context("spawn")
+            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx,
+                                             initializer=_process_init,
+                                             initargs=(self._token, shared))
+            self._pool_shared = shared
+        pool, token = self._pool, self._token
+        return _ordered(lambda t: pool.submit(_process_call, fn, token, t), tasks, progress,
+                        self.workers)
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+            self._pool_shared = None
 
 
 def _dask_call(fn, shared, task):
@@ -225,6 +240,8 @@ class DaskExecutor(Executor):
         self._cluster = None
         self._client = None
         self._dashboard = False
+        self._shared = None
+        self._shared_of = None
         if address is not None:
             if not isinstance(address, str) or "://" not in address:
                 raise InputError(f"scheduler address {address!r}: give it as tcp://HOST:PORT")
@@ -289,8 +306,14 @@ class DaskExecutor(Executor):
         if not total:
             return []
         client = self._client
-        # the shared data goes to every worker once; tasks refer to it
-        handle = client.scatter(shared, broadcast=True, hash=False) if shared is not None else None
+        # the shared data goes to every worker once (and stays there for the next map with the
+        # same object); tasks refer to it
+        if shared is not self._shared_of:
+            self._drop_shared()
+            self._shared = client.scatter(shared, broadcast=True, hash=False) \
+                if shared is not None else None
+            self._shared_of = shared
+        handle = self._shared
         futures = client.map(_dask_call, [fn] * total, [handle] * total, tasks, pure=False)
         index = {f.key: n for n, f in enumerate(futures)}
         out: list = [None] * total
@@ -303,9 +326,13 @@ class DaskExecutor(Executor):
                     progress(done, total)
         finally:
             client.cancel(futures)
-            if handle is not None:
-                client.cancel([handle])
         return out
+
+    def _drop_shared(self) -> None:
+        if self._shared is not None and self._client is not None:
+            self._client.cancel([self._shared])
+        self._shared = None
+        self._shared_of = None
 
     def close(self) -> None:
         # a worker slow to exit is killed by its nanny: expected here, not worth a warning
@@ -313,6 +340,7 @@ class DaskExecutor(Executor):
         level = log.level
         log.setLevel(logging.ERROR)
         try:
+            self._drop_shared()
             if self._client is not None:
                 self._client.close()
                 self._client = None
