@@ -5,15 +5,14 @@
 from __future__ import annotations
 
 import math
-import multiprocessing
 import time
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 
 from ..errors import FusionkitError, InputError
+from ..executor import Executor, InProcess, LocalProcesses
 from ..grid import OccupancyGrid
 from ..transform import Transform2D
 from .cases import CaseSpec, WorldSpec, make_case, plan_cases
@@ -100,17 +99,8 @@ def run_case(spec: CaseSpec, config: BenchConfig, keep_grids: bool = False) -> d
     return out
 
 
-def _worker_init():
-    # the workers share the cores: every method runs on one thread, so that timings compare
-    # like with like (the consensus method does by default)
-    import cv2
-    import numba
-    numba.set_num_threads(1)
-    cv2.setNumThreads(1)
-
-
-def _run_one(args):
-    spec, config, keep = args
+def _run_one(config, task):
+    spec, keep = task
     return run_case(spec, config, keep_grids=keep)
 
 
@@ -129,34 +119,25 @@ class BenchResult:
 
 def run_bench(worlds: Sequence[WorldSpec], config: BenchConfig, *, jobs: int = 1,
               skipped: Sequence = (), command: str = "",
-              progress: Callable[[int, int, str], None] | None = None) -> BenchResult:
-    """Run the suite (``jobs`` processes; results do not depend on it)."""
+              progress: Callable[[int, int, str], None] | None = None,
+              executor: Executor | None = None) -> BenchResult:
+    """Run the suite on ``executor`` (default: ``jobs`` local processes, or this process for
+    one; each worker process runs every method on one thread). Results do not depend on where
+    the cases run; timings do."""
     if jobs < 1:
         raise InputError(f"jobs must be >= 1, got {jobs}")
     t0 = time.perf_counter()
     specs = plan_cases(worlds, config)
     show = next((s.index for s in specs if s.robots >= 3), specs[0].index)
-    tasks = [(s, config, s.index == show) for s in specs]
-    records: list = [None] * len(specs)
-    done = 0
-    if progress is not None:
-        progress(0, len(specs), "")
-    if jobs == 1:
-        for t in tasks:
-            rec = _run_one(t)
-            records[rec["index"]] = rec
-            done += 1
-            if progress is not None:
-                progress(done, len(specs), f"{rec['world']} {rec['mode']} K={rec['robots']}")
-    else:
-        # fresh interpreters: forking a process whose numba kernels started OpenMP threads is unsafe
-        ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=jobs, initializer=_worker_init, mp_context=ctx) as pool:
-            for rec in pool.map(_run_one, tasks, chunksize=1):
-                records[rec["index"]] = rec
-                done += 1
-                if progress is not None:
-                    progress(done, len(specs), f"{rec['world']} {rec['mode']} K={rec['robots']}")
+    tasks = [(s, s.index == show) for s in specs]
+    ex = executor if executor is not None else InProcess() if jobs == 1 else LocalProcesses(jobs)
+
+    def tick(done, total):
+        if progress is not None:
+            progress(done, total, "")
+
+    # each case is built from its own seed where it runs; records come back in case order
+    records = ex.map(_run_one, tasks, shared=config, progress=tick)
     showcase = records[show].pop("_grids", None)
     if showcase is not None:
         showcase["index"] = show

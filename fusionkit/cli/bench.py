@@ -7,7 +7,8 @@ import sys
 from pathlib import Path
 
 from ..errors import InputError
-from ._common import Progress, float_range, int_range
+from ._common import float_range, int_range
+from ._executor import add_executor_options, executor_from_args
 
 
 def register(sub) -> None:
@@ -25,7 +26,7 @@ def register(sub) -> None:
                     "below --max-rotation and its centroid within --max-cells of the truth, a wrong "
                     "merge when merged outside those bounds, a refusal when not merged. Prints the "
                     "table and writes OUT/bench.md, OUT/bench.json and OUT/bench_METHOD.png (one "
-                    "case per method). Results do not depend on --jobs; timings do.")
+                    "case per method). Results do not depend on --jobs or on the back end; timings do.")
     p.add_argument("folders", nargs="*", metavar="DIR",
                    help="folders of ground-truth maps (*.yaml); default: maps and maps/real, plus "
                         "the built-in worlds not already found there")
@@ -71,9 +72,10 @@ def register(sub) -> None:
                    help=f"success bound on the centroid displacement, cells (default {d.max_cells})")
     p.add_argument("--seed", type=int, default=d.seed, help=f"seed of the suite (default {d.seed})")
     p.add_argument("--jobs", type=int_range(1, 64), default=1,
-                   help="cases run in this many processes at once (default 1); with more than "
-                        "one, every method runs on one thread (with one, a method may use every "
-                        "core, as OpenCV does for map-merge)")
+                   help="cases run in this many processes at once (default 1; the same as "
+                        "--workers); with more than one, every method runs on one thread (with "
+                        "one, a method may use every core, as OpenCV does for map-merge)")
+    add_executor_options(p, what="cases")
     p.add_argument("--out", default="bench", metavar="DIR",
                    help="output folder, created if missing (default: bench)")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
@@ -82,6 +84,7 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..bench import BenchConfig, find_worlds, format_table, run_bench, summarize, write_outputs
+    from ..progress import ProgressBar
 
     folders = list(args.folders)
     builtin = args.worlds
@@ -101,12 +104,15 @@ def run(args) -> int:
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder; choose another --out")
     worlds, skipped = find_worlds(folders, builtin)
-    progress = Progress("bench", enabled=False if args.quiet else None)
+    progress = ProgressBar("bench", unit="cases", enabled=False if args.quiet else None)
     command = "fusionkit bench " + " ".join(shlex.quote(a) for a in sys.argv[2:]) \
         if len(sys.argv) > 1 and sys.argv[1] == "bench" else ""
-    result = run_bench(worlds, config, jobs=args.jobs, skipped=skipped, command=command,
-                       progress=lambda done, total, label: progress(done, total, label))
-    progress.close()
+    with executor_from_args(args, jobs=args.jobs) as executor:
+        if not args.quiet and executor.name != "inprocess":
+            progress.note(executor.describe())
+        result = run_bench(worlds, config, skipped=skipped, command=command, executor=executor,
+                           progress=lambda done, total, label: progress(done, total, label))
+        progress.close()
     summary = summarize(result)
     paths = write_outputs(result, out, summary)
     if not args.quiet:

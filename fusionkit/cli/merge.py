@@ -4,18 +4,21 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 from .._atomic import check_distinct, check_not_input, check_writable, show
 from ..errors import InputError
 from ..labels import clip_left
-from ._common import Progress, add_merge_options, merge_config_from_args
+from ._common import Progress, add_merge_options, int_range, merge_config_from_args
+from ._executor import add_executor_options, executor_from_args
 
 EXIT_ALL_MERGED = 0
 EXIT_SOME_LEFT_OUT = 3
 
 
 def register(sub) -> None:
+    from ..methods.consensus import ConsensusConfig
     p = sub.add_parser(
         "merge", help="fuse several robots' maps into the first map's frame",
         description="Find the rigid transform of each map into the reference map's frame and fuse "
@@ -33,13 +36,22 @@ def register(sub) -> None:
     p.add_argument("--reference", metavar="MAP.yaml",
                    help="the map whose frame is the merged frame (default: the first map)")
     add_merge_options(p)
+    p.add_argument("--candidates", type=int_range(0, 100000), default=None, metavar="M",
+                   help="consensus method: estimate in full only each map's M best-ranked others "
+                        "(by a cheap signature of its scans) and the pairs that close loops, so "
+                        "a large fleet costs about linearly in its size; 0: every pair "
+                        f"(default {ConsensusConfig().candidates})")
+    add_executor_options(p, what="pairs")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
+    from ..executor import using
     from ..mapio import group_map_files, save_maps
+    from ..methods.consensus import ConsensusConfig
     from ..pipeline import MergeResult, group_output_paths, merge
+    from ..progress import ProgressBar
 
     out = Path(args.output)
     if out.suffix not in (".yaml", ".yml"):
@@ -58,16 +70,33 @@ def run(args) -> int:
             raise InputError(f"--reference {show(args.reference, 200)} is not one of the maps given")
         reference = inputs.index(args.reference)
     config = merge_config_from_args(args, reference=reference)
+    if args.candidates is not None:
+        config = replace(config, consensus=replace(config.consensus or ConsensusConfig(),
+                                                   candidates=args.candidates))
     progress = Progress("merging", enabled=None if not args.quiet else False)
+    pairs_bar = ProgressBar("merge", unit="pairs", enabled=None if not args.quiet else False)
+
+    last: list = []
 
     def callback(ev):
-        if ev.stage == "align" and ev.pso is not None:
+        if config.method == "consensus":
+            if ev.stage == "align":                        # the pairs: the long part
+                pairs_bar(ev.step, ev.total)
+                last[:] = [ev.total]
+            elif last:                                     # the pairs are done
+                pairs_bar(last[0], last[0])
+                last.clear()
+        elif ev.stage == "align" and ev.pso is not None:
             progress(ev.step, ev.total, f"{ev.label} it {ev.pso.iteration}")
         elif ev.stage != "align":
             progress(0, 1, ev.stage)
 
-    result: MergeResult = merge(inputs, config=config, callback=callback)
-    progress.close()
+    with executor_from_args(args) as executor, using(executor):
+        if not args.quiet and executor.name != "inprocess":
+            pairs_bar.note(executor.describe())
+        result: MergeResult = merge(inputs, config=config, callback=callback)
+        pairs_bar.close()
+        progress.close()
     group_paths = group_output_paths(out, len(result.groups))
     check_not_input(group_paths + [q.with_suffix(".pgm") for q in group_paths],
                     protected_inputs(inputs))

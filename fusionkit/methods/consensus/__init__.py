@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import itertools
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -37,7 +36,9 @@ from typing import Callable, Sequence
 
 from scipy.spatial import cKDTree
 
+from .candidates import estimate_fleet
 from ...errors import InputError
+from ...executor import Executor, InProcess, current_executor
 from ...grid import OccupancyGrid
 from ...scanlog import ScanLog
 from ._graph import GraphResult, solve_graph
@@ -84,6 +85,12 @@ def _pair(indexes, hists, evidence, trees, cfg, i, j, seed, exhaustive=False) ->
     return estimate_indexed(indexes[i], indexes[j], cfg, hist_a=hists[i], hist_b=hists[j],
                             evidence_a=evidence[i], ia=i, ib=j, seed=seed, exhaustive=exhaustive,
                             tree_a=trees.get(i))
+
+
+def _pair_task(shared, task) -> PairResult:
+    indexes, hists, evidence, trees, cfg = shared
+    i, j, seed, exhaustive = task
+    return _pair(indexes, hists, evidence, trees, cfg, i, j, seed, exhaustive)
 
 
 def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None = None,
@@ -147,7 +154,8 @@ class MapsResult:
 def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None] | None = None, *,
                   config: ConsensusConfig = ConsensusConfig(), reference: int = 0, seed: int = 0,
                   virtual_poses: int = 1500,
-                  callback: Callable[[str, int, int, tuple | None], None] | None = None) -> MapsResult:
+                  callback: Callable[[str, int, int, tuple | None], None] | None = None,
+                  executor: Executor | None = None) -> MapsResult:
     """Place every map in the reference map's frame (or leave it out when not sure).
 
     Parameters
@@ -165,8 +173,14 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
         Called, in the calling thread, as each map is prepared (``"scans"``) and each pair is
         estimated (``"align"``, with ``pair = (i, j)``).
 
-    Maps are prepared and pairs estimated on ``config.threads`` threads (the kernels release
-    the interpreter); the result does not depend on their number.
+    executor : fusionkit.executor.Executor, optional
+        Where the pairs are estimated (default: the one set by
+        :func:`fusionkit.executor.using`, else ``config.threads`` threads here).
+
+    Maps are prepared on ``config.threads`` threads (the kernels release the interpreter) and
+    pairs estimated on the executor; the result does not depend on either. With
+    ``config.candidates``, a large fleet has only its candidate pairs estimated
+    (:func:`fusionkit.methods.consensus.candidates.estimate_fleet`).
     """
     grids = list(grids)
     n = len(grids)
@@ -208,13 +222,20 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
         trees = {k: p[3] for k, p in enumerate(prepared) if p[3] is not None}
         seconds["prepare"] = time.perf_counter() - t0
 
+        ex = executor if executor is not None else current_executor()
+        ex = ex if ex is not None else InProcess(workers)
+        shared = (indexes, hists, evidence, trees, config)
+
         def estimate(todo, exhaustive=False):
-            jobs = [functools.partial(_pair, indexes, hists, evidence, trees, config, i, j, seed,
-                                      exhaustive) for i, j in todo]
-            return dict(zip(todo, run(jobs, "align", lambda s: todo[s])))
+            def progress(done, total):
+                # as before: step = pairs finished, pair = the next one in order
+                if callback is not None and done < total:
+                    callback("align", done, total, todo[done])
+            tasks = [(i, j, seed, exhaustive) for i, j in todo]
+            return dict(zip(todo, ex.map(_pair_task, tasks, shared=shared, progress=progress)))
 
         t0 = time.perf_counter()
-        pairs = estimate(list(itertools.combinations(range(n), 2)))
+        pairs = estimate_fleet(estimate, indexes, hists, config.candidates)
         seconds["pairs"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         boxes = [corners(ix) for ix in indexes]

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import least_squares
 
+from .candidates import boxes_apart
 from ...transform import Transform2D
 from ._pair import ConsensusConfig
 from ._verify import displacement
@@ -354,6 +355,8 @@ def _place_group(root: int, edges: dict, indexes: list, cfg: ConsensusConfig, bo
                 if parent[b] == a or parent[a] == b:
                     continue
                 t_ba = transforms[a].inverse @ transforms[b]
+                if boxes_apart(boxes[a], boxes[b], t_ba, 3 * indexes[a].resolution):
+                    continue                               # no common cell: nothing to disagree on
                 chk = _cross_check(indexes[a], indexes[b], t_ba, cfg, boxes[b], tol)
                 if chk is not None and (worst is None or chk.score < worst[0]):
                     worst = (chk.score, a, b)

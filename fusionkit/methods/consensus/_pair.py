@@ -108,6 +108,10 @@ class ConsensusConfig:
     threads : int
         Threads that prepare the maps and estimate the pairs (0: one per core). One by
         default: the pairs of most cases are too quick for threads to pay (BENCHMARKS.md).
+    candidates : int
+        Each map's best-ranked others (by a cheap signature, :mod:`fusionkit.methods.consensus.candidates`) that
+        get a full estimate, plus the pairs that close loops; 0: every pair. A fleet of at most
+        ``candidates + 1`` maps has every pair estimated.
     """
 
     max_false_merge: float = 0.01
@@ -138,6 +142,7 @@ class ConsensusConfig:
     final_check: bool = True
     pose_graph: bool = True
     threads: int = 1
+    candidates: int = 4
 
     def __post_init__(self):
         v = self.max_false_merge
@@ -150,9 +155,9 @@ class ConsensusConfig:
             raise InputError(f"rival is a fraction in (0, 1], got {self.rival}")
         for name in ("scan_clusters", "rotation_peaks", "translations", "refine_top", "max_poses",
                      "max_refine_points", "coarse_points", "pso_top", "alias_peaks", "coarse_side",
-                     "threads", "null_samples"):
+                     "threads", "null_samples", "candidates"):
             v = getattr(self, name)
-            least = 0 if name in ("scan_clusters", "alias_peaks", "threads") else (
+            least = 0 if name in ("scan_clusters", "alias_peaks", "threads", "candidates") else (
                 8 if name == "null_samples" else 1)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
                 raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")

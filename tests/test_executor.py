@@ -1,0 +1,198 @@
+"""Back ends: a merge and a bench give exactly the in-process results on a 2-worker Dask
+LocalCluster (processes, loopback) and on local processes; tasks come back in order; a
+scheduler that does not answer is one clear error line, exit 2; the progress bar draws on a
+terminal only."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import signal
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from fusionkit.bench import BenchConfig, WorldSpec, make_case, plan_cases, run_bench
+from fusionkit.cli import main
+from fusionkit.methods.consensus import ConsensusConfig
+from fusionkit.errors import InputError
+from fusionkit.executor import DaskExecutor, InProcess, LocalProcesses, make_executor, using
+from fusionkit.pipeline import MergeConfig, merge
+from fusionkit.progress import ProgressBar, format_duration
+
+CAVE = WorldSpec("cave", builtin="cave")
+OFFICE = WorldSpec("office", builtin="office")
+
+
+@contextlib.contextmanager
+def deadline(seconds: int):
+    """Fail the test (instead of hanging) when the block runs longer than ``seconds``."""
+    def expired(signum, frame):
+        raise TimeoutError(f"took longer than {seconds} s")
+    old = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A 2-worker Dask LocalCluster on 127.0.0.1, dashboard off, closed by its handle."""
+    with deadline(120):
+        ex = DaskExecutor(2, dashboard=False)
+    try:
+        yield ex
+    finally:
+        with deadline(60):
+            ex.close()
+
+
+def _slow_square(shared, task):
+    # later tasks finish first, so that gathering in order is tested
+    time.sleep(0.02 * (5 - task % 5))
+    return shared["offset"] + task * task
+
+
+@pytest.mark.parametrize("make", [lambda: InProcess(), lambda: InProcess(3), lambda: LocalProcesses(2)],
+                         ids=["serial", "threads", "processes"])
+def test_results_come_back_in_task_order_with_the_shared_data(make):
+    seen = []
+    with deadline(120), make() as ex:
+        out = ex.map(_slow_square, list(range(12)), shared={"offset": 7},
+                     progress=lambda d, t: seen.append((d, t)))
+    assert out == [7 + k * k for k in range(12)]
+    assert seen[0] == (0, 12) and seen[-1] == (12, 12)
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen)
+
+
+def test_dask_runs_tasks_in_order_and_reports_progress(cluster):
+    seen = []
+    with deadline(120):
+        out = cluster.map(_slow_square, list(range(10)), shared={"offset": 1},
+                          progress=lambda d, t: seen.append(d))
+    assert out == [1 + k * k for k in range(10)]
+    assert seen[0] == 0 and seen[-1] == 10
+    assert cluster.workers == 2
+    assert cluster.client.scheduler.address.startswith("tcp://127.0.0.1:")
+    assert "dashboard: none" in cluster.describe()
+
+
+def _fleet():
+    """Four overlapping crops of the office (no scans): small and quick to merge."""
+    cfg = BenchConfig(cases=1, robots=(4,), modes=("crop",), seed=11)
+    case = make_case(plan_cases([OFFICE], cfg)[0], cfg)
+    return list(case.grids)
+
+
+def _same_merge(a, b):
+    assert [None if t is None else (t.x, t.y, t.theta) for t in a.transforms] == \
+           [None if t is None else (t.x, t.y, t.theta) for t in b.transforms]
+    assert [p.confidence for p in a.placements] == [p.confidence for p in b.placements]
+    assert np.array_equal(a.grid.data, b.grid.data)
+    assert [(s.placed, s.new, s.confidence) for s in a.steps] == \
+           [(s.placed, s.new, s.confidence) for s in b.steps]
+
+
+def test_merge_on_a_local_cluster_equals_the_in_process_merge(cluster):
+    grids = _fleet()
+    # one candidate per map: the candidate, widening and loop-closing rounds all run remotely
+    cfg = MergeConfig(consensus=ConsensusConfig(candidates=1))
+    here = merge(grids, config=cfg)
+    assert sum(t is not None for t in here.transforms) >= 3
+    with deadline(300), using(cluster):
+        there = merge(grids, config=cfg)
+    _same_merge(here, there)
+
+
+def test_merge_on_local_processes_equals_the_in_process_merge():
+    grids = _fleet()
+    here = merge(grids)
+    with deadline(300), LocalProcesses(2) as ex, using(ex):
+        there = merge(grids)
+    _same_merge(here, there)
+
+
+def _strip(cases):
+    """Bench records without wall times."""
+    out = []
+    for rec in cases:
+        rec = json.loads(json.dumps(rec, default=float))
+        rec.pop("build_seconds")
+        for m in rec["methods"].values():
+            m.pop("seconds")
+            m.pop("seconds_per_pair")
+        out.append(rec)
+    return out
+
+
+def test_bench_on_a_local_cluster_equals_the_in_process_bench(cluster):
+    cfg = BenchConfig(methods=("consensus", "hough-spectrum"), modes=("crop",), robots=(2, 3),
+                      cases=3, seed=4)
+    here = run_bench([CAVE], cfg)
+    with deadline(300):
+        there = run_bench([CAVE], cfg, executor=cluster)
+    assert _strip(there.cases) == _strip(here.cases)
+    assert there.showcase["index"] == here.showcase["index"]
+    assert np.array_equal(there.showcase["fused"]["consensus"]["data"],
+                          here.showcase["fused"]["consensus"]["data"])
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_scheduler_that_does_not_answer_is_one_clear_error_line(tmp_path, capsys):
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    t0 = time.monotonic()
+    with deadline(60):
+        code = main(["bench", "--worlds", "cave", "--cases", "1", "--out", str(tmp_path / "b"),
+                     "--scheduler", address, "--scheduler-timeout", "2"])
+    assert code == 2
+    assert time.monotonic() - t0 < 30
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and address in err[0] and "Traceback" not in err[0]
+    assert not (tmp_path / "b" / "bench.json").exists()
+    with pytest.raises(InputError, match="tcp://HOST:PORT"):
+        make_executor(scheduler="127.0.0.1:1")
+    with pytest.raises(InputError, match="back end"):
+        make_executor("cluster")
+
+
+def test_make_executor_picks_the_back_end():
+    assert isinstance(make_executor(), InProcess) and make_executor().workers == 1
+    assert isinstance(make_executor(workers=3), LocalProcesses)
+    assert isinstance(make_executor("inprocess", workers=3), InProcess)
+    with pytest.raises(InputError):
+        make_executor(workers=0)
+
+
+def test_progress_bar_shows_rate_and_time_left_on_a_terminal_only():
+    now = [0.0]
+    term = io.StringIO()
+    bar = ProgressBar("bench", unit="cases", stream=term, enabled=True, min_interval=0.0,
+                      clock=lambda: now[0])
+    bar(0, 10)
+    now[0] = 4.0
+    bar(2, 10, "cave")
+    text = term.getvalue().split("\r")[-1]
+    assert "2/10 cases" in text and "0.50/s" in text and "16 s left" in text and "cave" in text
+    now[0] = 20.0
+    bar(10, 10)
+    bar.close()
+    assert term.getvalue().endswith("\n") and "10/10 cases" in term.getvalue()
+
+    pipe = io.StringIO()                       # not a terminal: nothing drawn
+    quiet = ProgressBar("bench", unit="cases", stream=pipe)
+    quiet(3, 10)
+    quiet.close()
+    assert pipe.getvalue() == ""
+    assert format_duration(42) == "42 s" and format_duration(185) == "3:05"
+    assert format_duration(3723) == "1:02:03"
