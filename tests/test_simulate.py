@@ -325,3 +325,16 @@ def test_cli_rejects_out_of_range_options(tmp_path, capsys, args):
     assert exc.value.code == 2
     assert "error: argument" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_fk_simulate_is_callable_even_after_the_module_was_imported():
+    import importlib
+
+    import fusionkit as fk
+
+    module = importlib.import_module("fusionkit.simulate")   # binds fk.simulate to the module
+    world = fk.default_world()
+    cfg = fk.SimulationConfig(robots=2, poses=60, seed=3)
+    a, b = fk.simulate(world, cfg), module.simulate(world, cfg)
+    assert len(a.robots) == 2
+    assert all(np.array_equal(x.grid.data, y.grid.data) for x, y in zip(a.robots, b.robots))
