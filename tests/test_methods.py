@@ -58,3 +58,18 @@ def test_a_method_places_each_map_or_says_why_not_and_merge_fuses_what_it_placed
         if want.transform is not None:
             assert got.transform.is_close(want.transform)
     assert set(result.seconds) >= {"fuse", "total"}
+
+
+def test_peer_confidence_goes_to_the_map_each_link_placed():
+    # map-merge roots its tree at the centre map, not the reference: the common-scale
+    # confidence of a link must still go to the map it placed, and the reference keeps 1
+    from fusionkit.bench import BenchConfig, WorldSpec, make_case, plan_cases
+    from fusionkit.pipeline import MergeConfig, merge
+
+    cfg = BenchConfig(cases=1, robots=(3,), modes=("explore",), seed=0)
+    case = make_case(plan_cases([WorldSpec("office", builtin="office")], cfg)[0], cfg)
+    res = merge(list(case.grids), config=MergeConfig(method="map-merge", seed=1))
+    conf = [p.confidence for p in res.placements]
+    assert all(p.merged for p in res.placements)
+    assert conf[0] == 1.0
+    assert all(0.9 <= c <= 1.0 for c in conf), conf

@@ -90,6 +90,23 @@ def _groups_from_pairs(n: int, transforms: list, accepted: dict):
     return group, g_t, g_c, trees
 
 
+def _oriented(tree, root: int) -> list:
+    """The edges of ``tree`` as ``(parent, child)`` pairs, walked outwards from ``root``."""
+    near: dict = {}
+    for a, b in tree:
+        near.setdefault(a, []).append(b)
+        near.setdefault(b, []).append(a)
+    out, seen, todo = [], {root}, [root]
+    while todo:
+        p = todo.pop(0)
+        for q in sorted(near.get(p, ())):
+            if q not in seen:
+                seen.add(q)
+                out.append((p, q))
+                todo.append(q)
+    return out
+
+
 def _common_confidence(grids, transforms, tree, groups, reference: int, settings: PeerSettings):
     """Each placed map's confidence from the consensus method's test (``exp(-nfa)`` of the link
     that placed it, 0..1), for a peer whose own score is on a scale of its own."""
@@ -98,9 +115,12 @@ def _common_confidence(grids, transforms, tree, groups, reference: int, settings
     cfg = replace(cfg, max_false_merge=settings.max_false_merge, use_scans=False)
     n = len(grids)
     group_of, group_tf, group_conf, group_trees = groups
-    links = [(p, q, transforms) for p, q in tree]
+    # each link judged from the map nearer its group's root (a peer's own tree may be rooted
+    # elsewhere, map-merge's at the centre map): the confidence goes to the map it placed
+    links = [(p, q, transforms) for p, q in _oriented(tree, reference)]
     for g_tree in group_trees:
-        links += [(p, q, group_tf) for p, q in g_tree]
+        root = min(k for edge in g_tree for k in edge)
+        links += [(p, q, group_tf) for p, q in _oriented(g_tree, root)]
     links = [(p, q, frame) for p, q, frame in links if frame[p] is not None and frame[q] is not None]
     if not links:
         return [1.0 if k == reference else 0.0 for k in range(n)], groups
