@@ -129,7 +129,7 @@ def search_tests(a: MapIndex, b: MapIndex, basin_cells: float = 8.0, ) -> float:
 def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray, *,
                samples: int = 64, distinct: float, points: np.ndarray | None = None,
                calibration: float = 0.0, correlation: float = 3.0,
-               seed=0) -> tuple[NullModel, list]:
+               settled=None, batch: int = 16, least: int = 32, seed=0) -> tuple[NullModel, list]:
     """Sample the evidence of wrong placements of B in A (see :class:`NullModel`).
 
     Parameters
@@ -148,6 +148,16 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     correlation : float
         Length of wall (m) whose cells agree or not together, the prior the measured design
         effect is shrunk towards.
+    settled : callable(NullModel, list) -> bool, optional
+        Sequential sampling: after every ``batch`` wrong placements, the model of those drawn
+        so far and the placements themselves are passed to ``settled``; when it answers that
+        the decision no longer depends on more samples, sampling stops there. Without it,
+        ``samples`` are drawn.
+    batch : int
+        Wrong placements drawn between two calls of ``settled``.
+    least : int
+        Wrong placements drawn before ``settled`` is first asked (the spread of fewer is too
+        rough to stop on).
     seed : int or numpy.random.Generator
 
     Returns
@@ -158,6 +168,7 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     rng = np.random.default_rng(seed)
     pts = b.refine_points if points is None else points
     out = []
+    tests = search_tests(a, b)
     if len(a.points) and len(pts):
         for _ in range(3 * samples):
             if len(out) >= samples:
@@ -172,6 +183,17 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
             if displacement(t, away_from, box) <= distinct:
                 continue
             out.append((t, verify(a, b, t)))
+            if (settled is not None and len(out) >= least and len(out) % batch == 0
+                    and len(out) < samples):
+                model = _fit(out, a.resolution, tests, calibration, correlation)
+                if model.usable and settled(model, out):
+                    break
+    return _fit(out, a.resolution, tests, calibration, correlation), out
+
+
+def _fit(out: list, resolution: float, tests: float, calibration: float,
+         correlation: float) -> NullModel:
+    """The null model of the wrong placements ``out`` (``(Transform2D, Check)`` pairs)."""
     kn = np.array([_trials(chk) for _, chk in out], float).reshape(-1, 2)
     kn = kn[kn[:, 1] > 0]
     if len(kn):
@@ -184,7 +206,7 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
         # sixty-odd wrong placements measure it only roughly (from a few tens to a few hundred
         # cells on one map): shrink it towards the cells of ``correlation`` metres of wall
         # (geometric mean)
-        design = math.sqrt(measured * max(correlation / a.resolution, 1.0))
+        design = math.sqrt(measured * max(correlation / resolution, 1.0))
     else:
         f, p0, design = np.zeros(0), 1.0, 1.0
-    return NullModel(f, kn[:, 1], p0, design, search_tests(a, b), calibration), out
+    return NullModel(f, kn[:, 1], p0, design, tests, calibration)

@@ -14,7 +14,7 @@ from ...errors import InputError
 from ...transform import Transform2D
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
-from ._search import Correlator, EvidenceRaster, rotation_candidates
+from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
 from ._null import NullModel, null_model
 from ._verify import (DEFAULT_GATES, Check, displacement, refine_cloud, refine_icp,
                       refine_pso, verify)
@@ -97,6 +97,14 @@ class ConsensusConfig:
     fallback_step : float
         Rotation step (degrees) of that search (its placements are judged by the same test: the
         number of placements it could end on does not depend on how many starts it tries).
+    fallback_rotations : int
+        Rotations of that search's sweep (made a level up the evidence pyramid, at every
+        ``fallback_step`` degrees) whose translations are then searched in full; 0 to search
+        every rotation of that grid in full, at the evidence raster's own resolution.
+    null_margin : float
+        Decades: the null distribution is drawn in batches, and stops being drawn once the
+        placement under test is this far beyond or short of the threshold and no wrong
+        placement drawn comes near it (``null_samples`` at most; ``inf`` draws them all).
     loop_cells : float
         Largest disagreement (cells, at the moving map's corners) of a loop of three
         placements for it to count as consistent.
@@ -134,6 +142,8 @@ class ConsensusConfig:
     pso_top: int = 4
     fallback: bool = True
     fallback_step: float = 2.0
+    fallback_rotations: int = 12
+    null_margin: float = 5.0
     loop_cells: float = 8.0
     final_check: bool = True
     pose_graph: bool = True
@@ -150,9 +160,10 @@ class ConsensusConfig:
             raise InputError(f"rival is a fraction in (0, 1], got {self.rival}")
         for name in ("scan_clusters", "rotation_peaks", "translations", "refine_top", "max_poses",
                      "max_refine_points", "coarse_points", "pso_top", "alias_peaks", "coarse_side",
-                     "threads", "null_samples"):
+                     "threads", "null_samples", "fallback_rotations"):
             v = getattr(self, name)
-            least = 0 if name in ("scan_clusters", "alias_peaks", "threads") else (
+            least = 0 if name in ("scan_clusters", "alias_peaks", "threads",
+                                  "fallback_rotations") else (
                 8 if name == "null_samples" else 1)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
                 raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
@@ -161,6 +172,10 @@ class ConsensusConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a positive number, got {v!r}")
+        v = self.null_margin
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0):
+            raise InputError(f"null_margin is a positive number of decades (inf: never stop "
+                             f"early), got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -274,8 +289,13 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     starts: list[tuple[Transform2D, str]] = []
     rots = rotation_candidates(hist_a, hist_b, cfg.rotation_peaks)
     if exhaustive:
-        n = max(4, int(round(360.0 / cfg.fallback_step)))
-        grid = [-math.pi + 2 * math.pi * k / n for k in range(n)]
+        # every rotation, swept a level up the evidence pyramid; the best of them searched in full
+        if cfg.fallback_rotations:
+            grid = pyramid_rotations(evidence_a, b.points, step=math.radians(cfg.fallback_step),
+                                     count=cfg.fallback_rotations)
+        else:
+            n = max(4, int(round(360.0 / cfg.fallback_step)))
+            grid = [-math.pi + 2 * math.pi * k / n for k in range(n)]
         rots += [r for r in grid if all(abs(math.remainder(r - q, 2 * math.pi))
                                         > math.radians(cfg.fallback_step / 2) for q in rots)]
     n_hyp = 0
@@ -294,7 +314,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     head = set(rots[: 2 * cfg.rotation_peaks + 2])
     corr = Correlator(evidence_a, b.points)
     for th in rots:
-        count = cfg.translations if th in head else 2
+        count = cfg.translations if th in head or (exhaustive and cfg.fallback_rotations) else 2
         wall += [(s, t) for t, s in corr.translations(th, count=count)]
     wall.sort(key=lambda st: -st[0])
     starts += [(t, "walls") for _, t in wall[: cfg.refine_top * (3 if exhaustive else 1)]]
@@ -375,10 +395,22 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     # the test: the best placement's evidence against the evidence of wrong placements of the
     # same two maps (a contrario: its number of false alarms), then against every distinct
     # placement found (by the search or among the wrong placements sampled)
+    eps = cfg.max_false_merge
+
+    def settled(model: NullModel, drawn: list) -> bool:
+        # far short of the threshold: refused whatever more samples show; far beyond it, with
+        # no wrong placement drawn near the best one: accepted unless a rival is found, and
+        # the rivals that matter fit nearly as well (the search and the alias search look for
+        # them too)
+        lg = model.log10_nfa(best.check) - math.log10(eps)
+        if lg >= cfg.null_margin:
+            return True
+        return lg <= -cfg.null_margin and all(
+            chk.evidence() < 0.5 * best.rank for _, chk in drawn)
+
     null, wrong = null_model(a, b, best.transform, box, samples=cfg.null_samples,
                              distinct=distinct, points=thin, calibration=cfg.calibration,
-                             correlation=cfg.wall_correlation, seed=rng)
-    eps = cfg.max_false_merge
+                             correlation=cfg.wall_correlation, settled=settled, seed=rng)
 
     def judged(c: Candidate) -> Candidate:
         return Candidate(c.transform, c.check, c.source, null.nfa(c.check))
