@@ -33,7 +33,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ...transform import Transform2D
-from ._pair import ConsensusConfig
+from ._config import ConsensusConfig
 from ._verify import displacement
 from ._verify import refine_icp, verify
 
