@@ -9,12 +9,13 @@ variant below and map-merge merge each case in turn, one thread each, so that th
 compare; a pair is placed right within 2 degrees and 3 cells of the truth. Prints, per
 variant, the pairs placed right, wrong and refused, the median time per pair, the median of
 the per-case ratio to map-merge's time, the ratio of the medians, and the median share of the
-time spent by the fall-back search.
+time spent by the fall-back search, and the sum of the times per pair.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import statistics
 import time
@@ -29,6 +30,8 @@ from fusionkit.methods.consensus import ConsensusConfig
 from fusionkit.pipeline import MergeConfig, merge
 
 VARIANTS = {
+    "consensus, before (full null and fall-back)": {"null_margin": math.inf, "fallback_rotations": 0,
+                                                   "null_wide_points": 0},
     "consensus, full null and fall-back": {"null_margin": math.inf, "fallback_rotations": 0},
     "consensus, sequential null": {"fallback_rotations": 0},
     "consensus, as shipped": {},
@@ -59,7 +62,11 @@ def main() -> None:
     ap.add_argument("--modes", nargs="+", default=["crop"], choices=["crop", "explore"])
     ap.add_argument("--drift", type=float, default=0.0, help="odometry drift, m per sqrt(m)")
     ap.add_argument("--drift-theta", type=float, default=0.0, help="heading drift, rad per sqrt(m)")
+    ap.add_argument("--try", dest="trial", default="", metavar="JSON",
+                    help='settings of one more variant, e.g. \'{"coarse_points": 400}\'')
     args = ap.parse_args()
+    if args.trial:
+        VARIANTS[f"consensus, {args.trial}"] = json.loads(args.trial)
     root = Path(__file__).resolve().parents[1]
     shared = root.parent / "shared" / "maps" / "real"
     worlds, _ = find_worlds([shared if shared.is_dir() else root / "maps" / "real"],
@@ -93,14 +100,14 @@ def main() -> None:
     base = runs["map-merge"]["t"]
     print(f"{args.cases} cases, modes {' '.join(args.modes)}, seed {args.seed}, "
           f"drift {args.drift} m and {args.drift_theta} rad per sqrt(m)")
-    print(f"{'method':<38} {'right':>6} {'wrong':>6} {'refused':>8} {'s / pair':>9} "
-          f"{'x map-merge':>12} {'ratio of medians':>17} {'fall-back':>10}")
+    print(f"{'method':<44} {'right':>6} {'wrong':>6} {'refused':>8} {'s / pair':>9} "
+          f"{'x map-merge':>12} {'ratio of medians':>17} {'fall-back':>10} {'total s':>8}")
     for name, st in runs.items():
         ratio = statistics.median(a / max(b, 1e-9) for a, b in zip(st["t"], base))
         rom = statistics.median(st["t"]) / max(statistics.median(base), 1e-9)
-        print(f"{name:<38} {st['right']:>6} {st['wrong']:>6} {st['refused']:>8} "
+        print(f"{name:<44} {st['right']:>6} {st['wrong']:>6} {st['refused']:>8} "
               f"{statistics.median(st['t']):9.3f} {ratio:12.2f} {rom:17.2f} "
-              f"{100 * statistics.median(st['fb']):9.0f}%")
+              f"{100 * statistics.median(st['fb']):9.0f}% {sum(st['t']):8.2f}")
 
 
 if __name__ == "__main__":

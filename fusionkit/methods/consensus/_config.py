@@ -28,6 +28,9 @@ class ConsensusConfig:
         maps' cell size, extent or clutter.
     null_samples : int
         Wrong placements sampled (ICP from random starts) for the null distribution.
+    null_wide_points : int
+        Wall points the wide gates of those ICPs run on (their narrow gates run on
+        ``coarse_points``); 0 to run every gate on ``coarse_points``.
     calibration : float
         Decades added to the model's count of false alarms (:class:`NullModel`): on pairs of
         crops of two different buildings the model is optimistic; this is chosen there, by
@@ -110,6 +113,7 @@ class ConsensusConfig:
 
     max_false_merge: float = 0.01
     null_samples: int = 64
+    null_wide_points: int = 300
     calibration: float = 7.5
     wall_correlation: float = 3.0
     cloud_shift: float = 4.0
@@ -150,10 +154,11 @@ class ConsensusConfig:
             raise InputError(f"rival is a fraction in (0, 1], got {self.rival}")
         for name in ("scan_clusters", "rotation_peaks", "translations", "refine_top", "max_poses",
                      "max_refine_points", "coarse_points", "pso_top", "alias_peaks", "coarse_side",
-                     "threads", "null_samples", "fallback_rotations"):
+                     "threads", "null_samples", "fallback_rotations",
+                     "null_wide_points"):
             v = getattr(self, name)
             least = 0 if name in ("scan_clusters", "alias_peaks", "threads",
-                                  "fallback_rotations") else (
+                                  "fallback_rotations", "null_wide_points") else (
                 8 if name == "null_samples" else 1)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
                 raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")

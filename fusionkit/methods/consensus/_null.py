@@ -15,7 +15,7 @@ import numpy as np
 
 from ...transform import Transform2D
 from ._index import MapIndex
-from ._verify import displacement, refine_icp, verify
+from ._verify import DEFAULT_GATES, displacement, refine_icp, verify
 
 __all__ = ["NullModel", "null_model", "search_tests"]
 
@@ -129,7 +129,8 @@ def search_tests(a: MapIndex, b: MapIndex, basin_cells: float = 8.0, ) -> float:
 def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray, *,
                samples: int = 64, distinct: float, points: np.ndarray | None = None,
                calibration: float = 0.0, correlation: float = 3.0,
-               settled=None, batch: int = 16, least: int = 32, seed=0) -> tuple[NullModel, list]:
+               settled=None, batch: int = 16, least: int = 32,
+               wide_points: int = 300, seed=0) -> tuple[NullModel, list]:
     """Sample the evidence of wrong placements of B in A (see :class:`NullModel`).
 
     Parameters
@@ -153,6 +154,10 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
         so far and the placements themselves are passed to ``settled``; when it answers that
         the decision no longer depends on more samples, sampling stops there. Without it,
         ``samples`` are drawn.
+    wide_points : int
+        The ICP's wide gates run on this many of ``points`` (evenly spread), its narrow ones on
+        all of them, as the search's own refinement does with its starts (0: every gate on
+        all of them).
     batch : int
         Wrong placements drawn between two calls of ``settled``.
     least : int
@@ -169,6 +174,9 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     pts = b.refine_points if points is None else points
     out = []
     tests = search_tests(a, b)
+    wide = pts
+    if 0 < wide_points < len(pts):
+        wide = pts[np.linspace(0, len(pts) - 1, wide_points).astype(np.int64)]
     if len(a.points) and len(pts):
         for _ in range(3 * samples):
             if len(out) >= samples:
@@ -179,7 +187,11 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
             c, s = math.cos(th), math.sin(th)
             start = Transform2D(float(pa[0] - (c * pb[0] - s * pb[1])),
                                 float(pa[1] - (s * pb[0] + c * pb[1])), th)
-            t = refine_icp(a, pts, start)
+            if wide_points:
+                t = refine_icp(a, wide, start, gates=DEFAULT_GATES[:-2])
+                t = refine_icp(a, pts, t, gates=DEFAULT_GATES[-2:])
+            else:
+                t = refine_icp(a, pts, start)
             if displacement(t, away_from, box) <= distinct:
                 continue
             out.append((t, verify(a, b, t)))

@@ -254,7 +254,8 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
 
     null, wrong = null_model(a, b, best.transform, box, samples=cfg.null_samples,
                              distinct=distinct, points=thin, calibration=cfg.calibration,
-                             correlation=cfg.wall_correlation, settled=settled, seed=rng)
+                             correlation=cfg.wall_correlation, settled=settled,
+                             wide_points=cfg.null_wide_points, seed=rng)
 
     def judged(c: Candidate) -> Candidate:
         return Candidate(c.transform, c.check, c.source, null.nfa(c.check))
