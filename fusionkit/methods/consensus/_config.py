@@ -95,9 +95,11 @@ class ConsensusConfig:
         ``fallback_step`` degrees) whose translations are then searched in full; 0 to search
         every rotation of that grid in full, at the evidence raster's own resolution.
     null_margin : float
-        Decades: the null distribution is drawn in batches, and stops being drawn once the
-        placement under test is this far beyond or short of the threshold and no wrong
-        placement drawn comes near it (``null_samples`` at most; ``inf`` draws them all).
+        Decades: the null distribution is drawn in batches (32 wrong placements first, then 16
+        at a time), and stops being drawn once the placement under test stays this far short
+        of the threshold with half the design effect measured so far, or this far beyond it
+        with twice that design effect and no wrong placement drawn coming near it
+        (``null_samples`` at most; ``inf`` draws them all).
     loop_cells : float
         Largest disagreement (cells, at the moving map's corners) of a loop of three
         placements for it to count as consistent.
@@ -137,7 +139,7 @@ class ConsensusConfig:
     fallback: bool = True
     fallback_step: float = 2.0
     fallback_rotations: int = 12
-    null_margin: float = 5.0
+    null_margin: float = 2.0
     loop_cells: float = 8.0
     final_check: bool = True
     pose_graph: bool = True

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -242,15 +242,17 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     eps = cfg.max_false_merge
 
     def settled(model: NullModel, drawn: list) -> bool:
-        # far short of the threshold: refused whatever more samples show; far beyond it, with
-        # no wrong placement drawn near the best one: accepted unless a rival is found, and
-        # the rivals that matter fit nearly as well (the search and the alias search look for
-        # them too)
-        lg = model.log10_nfa(best.check) - math.log10(eps)
-        if lg >= cfg.null_margin:
+        # the decision no longer depends on more samples when it holds with the design effect
+        # half or twice what the samples so far show (its estimate is the roughest part of the
+        # model): far short of the threshold even at half, refused whatever more samples show;
+        # far beyond it even at twice, with no wrong placement drawn near the best one, accepted
+        # unless a rival is found (the search and the alias search look for them too)
+        th = math.log10(eps)
+        if replace(model, design=model.design / 2).log10_nfa(best.check) >= th + cfg.null_margin:
             return True
-        return lg <= -cfg.null_margin and all(
-            chk.evidence() < 0.5 * best.rank for _, chk in drawn)
+        return (replace(model, design=2 * model.design).log10_nfa(best.check)
+                <= th - cfg.null_margin
+                and all(chk.evidence() < 0.5 * best.rank for _, chk in drawn))
 
     null, wrong = null_model(a, b, best.transform, box, samples=cfg.null_samples,
                              distinct=distinct, points=thin, calibration=cfg.calibration,
