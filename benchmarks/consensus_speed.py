@@ -30,11 +30,10 @@ from fusionkit.methods.consensus import ConsensusConfig
 from fusionkit.pipeline import MergeConfig, merge
 
 VARIANTS = {
-    "consensus, before (full null and fall-back)": {"null_margin": math.inf, "fallback_rotations": 0,
-                                                   "null_wide_points": 0},
     "consensus, full null and fall-back": {"null_margin": math.inf, "fallback_rotations": 0},
     "consensus, sequential null": {"fallback_rotations": 0},
     "consensus, as shipped": {},
+    "consensus, null ICP wide gates on 300 points": {"null_wide_points": 300},
 }
 
 
