@@ -130,7 +130,7 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
                samples: int = 64, distinct: float, points: np.ndarray | None = None,
                calibration: float = 0.0, correlation: float = 3.0,
                settled=None, batch: int = 16, least: int = 32,
-               wide_points: int = 300, seed=0) -> tuple[NullModel, list]:
+               wide_points: int = 0, seed=0) -> tuple[NullModel, list]:
     """Sample the evidence of wrong placements of B in A (see :class:`NullModel`).
 
     Parameters
@@ -215,7 +215,7 @@ def _fit(out: list, resolution: float, tests: float, calibration: float,
         # the median ratio (over that of a chi-square with one degree of freedom, 0.455): a few
         # wrong placements on repeated structure must not hide how alike the others are
         measured = max(float(np.median((f - p0) ** 2 / binom)) / 0.455, 1.0)
-        # sixty-odd wrong placements measure it only roughly (from a few tens to a few hundred
+        # 32 to 64 wrong placements measure it only roughly (from a few tens to a few hundred
         # cells on one map): shrink it towards the cells of ``correlation`` metres of wall
         # (geometric mean)
         design = math.sqrt(measured * max(correlation / resolution, 1.0))
