@@ -34,7 +34,7 @@ from scipy.optimize import least_squares
 
 from .candidates import boxes_apart
 from ...transform import Transform2D
-from ._pair import ConsensusConfig
+from ._config import ConsensusConfig
 from ._verify import displacement
 from ._verify import refine_icp, verify
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..base import MergeEvent, MergeStep, PreparedMaps, tree_result
-from ._pair import ConsensusConfig
+from ._config import ConsensusConfig
 
 __all__ = ["CONSENSUS", "ConsensusSettings", "ConsensusMethod"]
 

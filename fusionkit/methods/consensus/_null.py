@@ -15,7 +15,7 @@ import numpy as np
 
 from ...transform import Transform2D
 from ._index import MapIndex
-from ._verify import displacement, refine_icp, verify
+from ._verify import DEFAULT_GATES, displacement, refine_icp, verify
 
 __all__ = ["NullModel", "null_model", "search_tests"]
 
@@ -129,7 +129,8 @@ def search_tests(a: MapIndex, b: MapIndex, basin_cells: float = 8.0, ) -> float:
 def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray, *,
                samples: int = 64, distinct: float, points: np.ndarray | None = None,
                calibration: float = 0.0, correlation: float = 3.0,
-               seed=0) -> tuple[NullModel, list]:
+               settled=None, batch: int = 16, least: int = 32,
+               wide_points: int = 0, seed=0) -> tuple[NullModel, list]:
     """Sample the evidence of wrong placements of B in A (see :class:`NullModel`).
 
     Parameters
@@ -148,6 +149,20 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     correlation : float
         Length of wall (m) whose cells agree or not together, the prior the measured design
         effect is shrunk towards.
+    settled : callable(NullModel, list) -> bool, optional
+        Sequential sampling: after every ``batch`` wrong placements, the model of those drawn
+        so far and the placements themselves are passed to ``settled``; when it answers that
+        the decision no longer depends on more samples, sampling stops there. Without it,
+        ``samples`` are drawn.
+    wide_points : int
+        The ICP's wide gates run on this many of ``points`` (evenly spread), its narrow ones on
+        all of them, as the search's own refinement does with its starts (0: every gate on
+        all of them).
+    batch : int
+        Wrong placements drawn between two calls of ``settled``.
+    least : int
+        Wrong placements drawn before ``settled`` is first asked (the spread of fewer is too
+        rough to stop on).
     seed : int or numpy.random.Generator
 
     Returns
@@ -158,6 +173,10 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     rng = np.random.default_rng(seed)
     pts = b.refine_points if points is None else points
     out = []
+    tests = search_tests(a, b)
+    wide = pts
+    if 0 < wide_points < len(pts):
+        wide = pts[np.linspace(0, len(pts) - 1, wide_points).astype(np.int64)]
     if len(a.points) and len(pts):
         for _ in range(3 * samples):
             if len(out) >= samples:
@@ -168,10 +187,25 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
             c, s = math.cos(th), math.sin(th)
             start = Transform2D(float(pa[0] - (c * pb[0] - s * pb[1])),
                                 float(pa[1] - (s * pb[0] + c * pb[1])), th)
-            t = refine_icp(a, pts, start)
+            if wide_points:
+                t = refine_icp(a, wide, start, gates=DEFAULT_GATES[:-2])
+                t = refine_icp(a, pts, t, gates=DEFAULT_GATES[-2:])
+            else:
+                t = refine_icp(a, pts, start)
             if displacement(t, away_from, box) <= distinct:
                 continue
             out.append((t, verify(a, b, t)))
+            if (settled is not None and len(out) >= least and len(out) % batch == 0
+                    and len(out) < samples):
+                model = _fit(out, a.resolution, tests, calibration, correlation)
+                if model.usable and settled(model, out):
+                    break
+    return _fit(out, a.resolution, tests, calibration, correlation), out
+
+
+def _fit(out: list, resolution: float, tests: float, calibration: float,
+         correlation: float) -> NullModel:
+    """The null model of the wrong placements ``out`` (``(Transform2D, Check)`` pairs)."""
     kn = np.array([_trials(chk) for _, chk in out], float).reshape(-1, 2)
     kn = kn[kn[:, 1] > 0]
     if len(kn):
@@ -181,10 +215,10 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
         # the median ratio (over that of a chi-square with one degree of freedom, 0.455): a few
         # wrong placements on repeated structure must not hide how alike the others are
         measured = max(float(np.median((f - p0) ** 2 / binom)) / 0.455, 1.0)
-        # sixty-odd wrong placements measure it only roughly (from a few tens to a few hundred
+        # 32 to 64 wrong placements measure it only roughly (from a few tens to a few hundred
         # cells on one map): shrink it towards the cells of ``correlation`` metres of wall
         # (geometric mean)
-        design = math.sqrt(measured * max(correlation / a.resolution, 1.0))
+        design = math.sqrt(measured * max(correlation / resolution, 1.0))
     else:
         f, p0, design = np.zeros(0), 1.0, 1.0
-    return NullModel(f, kn[:, 1], p0, design, search_tests(a, b), calibration), out
+    return NullModel(f, kn[:, 1], p0, design, tests, calibration)

@@ -4,168 +4,22 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ...alignment import make_field
-from ...errors import InputError
 from ...transform import Transform2D
+from ._config import ConsensusConfig
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
-from ._search import Correlator, EvidenceRaster, rotation_candidates
+from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
 from ._null import NullModel, null_model
 from ._verify import (DEFAULT_GATES, Check, displacement, refine_cloud, refine_icp,
                       refine_pso, verify)
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
-
-
-@dataclass(frozen=True)
-class ConsensusConfig:
-    """Settings of the consensus method.
-
-    Attributes
-    ----------
-    max_false_merge : float
-        The false-merge risk accepted, the one number the decision turns on: a placement is
-        accepted when the number of false alarms of its evidence (the expected count of wrong
-        placements, among all a search can end on, that would fit as well; judged against the
-        evidence the same two maps reach at many wrong placements, :class:`NullModel`) is at
-        most this, and no distinct placement is nearly as good: one that a wrong placement would
-        exceed the best from with probability above this. Its meaning does not depend on the
-        maps' cell size, extent or clutter.
-    null_samples : int
-        Wrong placements sampled (ICP from random starts) for the null distribution.
-    calibration : float
-        Decades added to the model's count of false alarms (:class:`NullModel`): on pairs of
-        crops of two different buildings the model is optimistic; this is chosen there, by
-        leave-one-world-out (BENCHMARKS.md).
-    wall_correlation : float
-        Length of wall (m) along which cells agree or not together: the prior of the null
-        model's design effect, which the measured one is shrunk towards (:func:`null_model`).
-    cloud_shift : float
-        Largest move (cells) the refinement on recorded scans may make to a placement.
-    rival : float
-        A distinct placement with at least this fraction of the best one's evidence
-        (:meth:`Check.evidence`) whose share of meeting walls is not significantly lower is a
-        rival. In the graph stage, a map that fits a third map in several places about equally
-        well has repeated structure, so its single fit elsewhere whose evidence is less than
-        ``1 / rival`` times those must be confirmed by a loop.
-    distinct_cells : float
-        Two placements are distinct when some corner of the moving map's known area moves by
-        more than this many cells between them.
-    rotation_peaks : int
-        Wall-direction correlation peaks tried as rotations (each in two branches).
-    translations : int
-        Translation peaks kept per candidate rotation.
-    refine_top : int
-        At most this many grid candidates (the best correlations) are refined and verified.
-    coarse : float
-        Cell size (m) of the translation search.
-    coarse_side : int
-        ... coarser when needed to keep the searched raster's longer side within this many
-        cells.
-    use_scans : bool
-        Use recorded scans (matched spectra) as a source of candidates.
-    virtual_scans : bool
-        Also cast virtual scans for maps without recorded ones and use them the same way.
-    scan_clusters : int
-        Clusters of scan hypotheses refined and verified.
-    pose_spacing : float
-        Scans used for matching are thinned to one per square of this side (m).
-    max_poses : int
-        At most this many scans per map are matched.
-    max_refine_points : int
-        Wall points used by the refiners.
-    alias_peaks : int
-        Translations tried, at the best placement's rotation, in search of aliases (other places
-        where repeated structure fits B as well); 0 to skip that search.
-    coarse_points : int
-        Wall points used by the wide-gate stages of the refinement of every start (the narrow
-        stages use ``max_refine_points``).
-    pso_refine : bool
-        When a candidate could rival the best one, polish both, and each other such candidate
-        (at most ``pso_top`` in all), with the paper's swarm (eq. 3) in a small box around it
-        after ICP.
-    pso_top : int
-        See ``pso_refine``.
-    fallback : bool
-        When a map is left out, search its pairs again exhaustively: every ``fallback_step``
-        degrees of rotation, three times as many candidates refined.
-    fallback_step : float
-        Rotation step (degrees) of that search (its placements are judged by the same test: the
-        number of placements it could end on does not depend on how many starts it tries).
-    loop_cells : float
-        Largest disagreement (cells, at the moving map's corners) of a loop of three
-        placements for it to count as consistent.
-    final_check : bool
-        Check every two placed maps against each other, and cut the weakest link between two
-        that disagree.
-    pose_graph : bool
-        Adjust the placements by least squares over all consistent links (loops).
-    threads : int
-        Threads that prepare the maps and estimate the pairs (0: one per core). One by
-        default: the pairs of most cases are too quick for threads to pay (BENCHMARKS.md).
-    candidates : int
-        Each map's best-ranked others (by a cheap signature, :mod:`fusionkit.methods.consensus.candidates`) that
-        get a full estimate, plus the pairs that close loops; 0: every pair. A fleet of at most
-        ``candidates + 1`` maps has every pair estimated.
-    """
-
-    max_false_merge: float = 0.01
-    null_samples: int = 64
-    calibration: float = 7.5
-    wall_correlation: float = 3.0
-    cloud_shift: float = 4.0
-    rival: float = 0.6
-    distinct_cells: float = 6.0
-    rotation_peaks: int = 4
-    translations: int = 3
-    refine_top: int = 16
-    coarse: float = 0.1
-    coarse_side: int = 256
-    use_scans: bool = True
-    virtual_scans: bool = False
-    scan_clusters: int = 6
-    pose_spacing: float = 0.25
-    max_poses: int = 1500
-    max_refine_points: int = 4000
-    coarse_points: int = 1000
-    alias_peaks: int = 6
-    pso_refine: bool = True
-    pso_top: int = 4
-    fallback: bool = True
-    fallback_step: float = 2.0
-    loop_cells: float = 8.0
-    final_check: bool = True
-    pose_graph: bool = True
-    threads: int = 1
-    candidates: int = 4
-
-    def __post_init__(self):
-        v = self.max_false_merge
-        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < 1.0):
-            raise InputError(f"max_false_merge is a risk in (0, 1) (e.g. 0.01), got {v!r}")
-        if not (isinstance(self.calibration, (int, float)) and math.isfinite(self.calibration)
-                and self.calibration >= 0):
-            raise InputError(f"calibration is a number of decades >= 0, got {self.calibration!r}")
-        if not 0.0 < self.rival <= 1.0:
-            raise InputError(f"rival is a fraction in (0, 1], got {self.rival}")
-        for name in ("scan_clusters", "rotation_peaks", "translations", "refine_top", "max_poses",
-                     "max_refine_points", "coarse_points", "pso_top", "alias_peaks", "coarse_side",
-                     "threads", "null_samples", "candidates"):
-            v = getattr(self, name)
-            least = 0 if name in ("scan_clusters", "alias_peaks", "threads", "candidates") else (
-                8 if name == "null_samples" else 1)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
-                raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
-        for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells", "fallback_step",
-                     "cloud_shift", "wall_correlation"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise InputError(f"{name} must be a positive number, got {v!r}")
 
 
 @dataclass(frozen=True)
@@ -279,8 +133,13 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     starts: list[tuple[Transform2D, str]] = []
     rots = rotation_candidates(hist_a, hist_b, cfg.rotation_peaks)
     if exhaustive:
-        n = max(4, int(round(360.0 / cfg.fallback_step)))
-        grid = [-math.pi + 2 * math.pi * k / n for k in range(n)]
+        # every rotation, swept a level up the evidence pyramid; the best of them searched in full
+        if cfg.fallback_rotations:
+            grid = pyramid_rotations(evidence_a, b.points, step=math.radians(cfg.fallback_step),
+                                     count=cfg.fallback_rotations)
+        else:
+            n = max(4, int(round(360.0 / cfg.fallback_step)))
+            grid = [-math.pi + 2 * math.pi * k / n for k in range(n)]
         rots += [r for r in grid if all(abs(math.remainder(r - q, 2 * math.pi))
                                         > math.radians(cfg.fallback_step / 2) for q in rots)]
     n_hyp = 0
@@ -299,7 +158,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     head = set(rots[: 2 * cfg.rotation_peaks + 2])
     corr = Correlator(evidence_a, b.points)
     for th in rots:
-        count = cfg.translations if th in head else 2
+        count = cfg.translations if th in head or (exhaustive and cfg.fallback_rotations) else 2
         wall += [(s, t) for t, s in corr.translations(th, count=count)]
     wall.sort(key=lambda st: -st[0])
     starts += [(t, "walls") for _, t in wall[: cfg.refine_top * (3 if exhaustive else 1)]]
@@ -380,10 +239,25 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     # the test: the best placement's evidence against the evidence of wrong placements of the
     # same two maps (a contrario: its number of false alarms), then against every distinct
     # placement found (by the search or among the wrong placements sampled)
+    eps = cfg.max_false_merge
+
+    def settled(model: NullModel, drawn: list) -> bool:
+        # the decision no longer depends on more samples when it holds with the design effect
+        # half or twice what the samples so far show (its estimate is the roughest part of the
+        # model): far short of the threshold even at half, refused whatever more samples show;
+        # far beyond it even at twice, with no wrong placement drawn near the best one, accepted
+        # unless a rival is found (the search and the alias search look for them too)
+        th = math.log10(eps)
+        if replace(model, design=model.design / 2).log10_nfa(best.check) >= th + cfg.null_margin:
+            return True
+        return (replace(model, design=2 * model.design).log10_nfa(best.check)
+                <= th - cfg.null_margin
+                and all(chk.evidence() < 0.5 * best.rank for _, chk in drawn))
+
     null, wrong = null_model(a, b, best.transform, box, samples=cfg.null_samples,
                              distinct=distinct, points=thin, calibration=cfg.calibration,
-                             correlation=cfg.wall_correlation, seed=rng)
-    eps = cfg.max_false_merge
+                             correlation=cfg.wall_correlation, settled=settled,
+                             wide_points=cfg.null_wide_points, seed=rng)
 
     def judged(c: Candidate) -> Candidate:
         return Candidate(c.transform, c.check, c.source, null.nfa(c.check))

@@ -29,7 +29,7 @@ from ...transform import Transform2D
 from ._index import MapIndex
 
 __all__ = ["orientation_histogram", "rotation_candidates", "EvidenceRaster", "evidence_raster",
-           "Correlator", "translation_candidates", "rotation_sweep"]
+           "Correlator", "translation_candidates", "rotation_sweep", "pyramid_rotations"]
 
 
 def orientation_histogram(index: MapIndex, bins: int = 180, sigma: float = 3.0) -> np.ndarray:
@@ -227,3 +227,24 @@ def rotation_sweep(ev: EvidenceRaster, points_b: np.ndarray, *, step: float = ma
     scores = np.array([corr.best(float(a)) for a in angles])
     idx = _local_maxima(scores, count, 2)
     return [(float(angles[i]), float(scores[i])) for i in idx]
+
+
+def pyramid_rotations(ev: EvidenceRaster, points_b: np.ndarray, *, step: float,
+                      count: int = 12) -> list[float]:
+    """Rotations B -> A worth a full translation search, from a sweep of every rotation on a
+    ``step`` grid at half the resolution of ``ev`` (a level up its pyramid, a quarter of the
+    cells to correlate): the ``count`` best circular local maxima of the best correlation at
+    each rotation, best first. The coarser raster is kept in A's ``cache``."""
+    if len(points_b) == 0:
+        return []
+    index = ev.index
+    key = ("pyramid", ev.factor)
+    up = index.cache.get(key)
+    if up is None:
+        up = evidence_raster(index, coarse=2 * ev.cell, max_side=max(max(ev.values.shape) // 2, 8))
+        index.cache[key] = up
+    corr = Correlator(up, points_b)
+    n = max(8, int(round(2 * math.pi / step)))
+    angles = -math.pi + 2 * math.pi * np.arange(n) / n
+    scores = np.array([corr.best(float(a)) for a in angles])
+    return [float(angles[i]) for i in _local_maxima(scores, count, 2)]

@@ -1,0 +1,183 @@
+"""The settings of the consensus method."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...errors import InputError
+
+__all__ = ["ConsensusConfig"]
+
+
+@dataclass(frozen=True)
+class ConsensusConfig:
+    """Settings of the consensus method.
+
+    Attributes
+    ----------
+    max_false_merge : float
+        The false-merge risk accepted, the one number the decision turns on: a placement is
+        accepted when the number of false alarms of its evidence (the expected count of wrong
+        placements, among all a search can end on, that would fit as well; judged against the
+        evidence the same two maps reach at many wrong placements, :class:`NullModel`) is at
+        most this, and no distinct placement is nearly as good: one that a wrong placement would
+        exceed the best from with probability above this. Its meaning does not depend on the
+        maps' cell size, extent or clutter.
+    null_samples : int
+        Wrong placements sampled (ICP from random starts) for the null distribution.
+    null_wide_points : int
+        Wall points the wide gates of those ICPs run on (their narrow gates run on
+        ``coarse_points``); 0, the default, to run every gate on ``coarse_points``. Fewer
+        points end the wrong placements a little lower (on the leave-one-world-out pairs, one
+        pair of two buildings gained 0.3 decades with 300), which shifts the calibration.
+    calibration : float
+        Decades added to the model's count of false alarms (:class:`NullModel`): on pairs of
+        crops of two different buildings the model is optimistic; this is chosen there, by
+        leave-one-world-out (BENCHMARKS.md).
+    wall_correlation : float
+        Length of wall (m) along which cells agree or not together: the prior of the null
+        model's design effect, which the measured one is shrunk towards (:func:`null_model`).
+    cloud_shift : float
+        Largest move (cells) the refinement on recorded scans may make to a placement.
+    rival : float
+        A distinct placement with at least this fraction of the best one's evidence
+        (:meth:`Check.evidence`) whose share of meeting walls is not significantly lower is a
+        rival. In the graph stage, a map that fits a third map in several places about equally
+        well has repeated structure, so its single fit elsewhere whose evidence is less than
+        ``1 / rival`` times those must be confirmed by a loop.
+    distinct_cells : float
+        Two placements are distinct when some corner of the moving map's known area moves by
+        more than this many cells between them.
+    rotation_peaks : int
+        Wall-direction correlation peaks tried as rotations (each in two branches).
+    translations : int
+        Translation peaks kept per candidate rotation.
+    refine_top : int
+        At most this many grid candidates (the best correlations) are refined and verified.
+    coarse : float
+        Cell size (m) of the translation search.
+    coarse_side : int
+        ... coarser when needed to keep the searched raster's longer side within this many
+        cells.
+    use_scans : bool
+        Use recorded scans (matched spectra) as a source of candidates.
+    virtual_scans : bool
+        Also cast virtual scans for maps without recorded ones and use them the same way.
+    scan_clusters : int
+        Clusters of scan hypotheses refined and verified.
+    pose_spacing : float
+        Scans used for matching are thinned to one per square of this side (m).
+    max_poses : int
+        At most this many scans per map are matched.
+    max_refine_points : int
+        Wall points used by the refiners.
+    alias_peaks : int
+        Translations tried, at the best placement's rotation, in search of aliases (other places
+        where repeated structure fits B as well); 0 to skip that search.
+    coarse_points : int
+        Wall points used by the wide-gate stages of the refinement of every start (the narrow
+        stages use ``max_refine_points``).
+    pso_refine : bool
+        When a candidate could rival the best one, polish both, and each other such candidate
+        (at most ``pso_top`` in all), with the paper's swarm (eq. 3) in a small box around it
+        after ICP.
+    pso_top : int
+        See ``pso_refine``.
+    fallback : bool
+        When a map is left out, search its pairs again exhaustively: every ``fallback_step``
+        degrees of rotation, three times as many candidates refined.
+    fallback_step : float
+        Rotation step (degrees) of that search (its placements are judged by the same test: the
+        number of placements it could end on does not depend on how many starts it tries).
+    fallback_rotations : int
+        Rotations of that search's sweep (made a level up the evidence pyramid, at every
+        ``fallback_step`` degrees) whose translations are then searched in full; 0 to search
+        every rotation of that grid in full, at the evidence raster's own resolution.
+    null_margin : float
+        Decades: the null distribution is drawn in batches (32 wrong placements first, then 16
+        at a time), and stops being drawn once the placement under test stays this far short
+        of the threshold with half the design effect measured so far, or this far beyond it
+        with twice that design effect and no wrong placement drawn coming near it
+        (``null_samples`` at most; ``inf`` draws them all).
+    loop_cells : float
+        Largest disagreement (cells, at the moving map's corners) of a loop of three
+        placements for it to count as consistent.
+    final_check : bool
+        Check every two placed maps against each other, and cut the weakest link between two
+        that disagree.
+    pose_graph : bool
+        Adjust the placements by least squares over all consistent links (loops).
+    threads : int
+        Threads that prepare the maps and estimate the pairs (0: one per core). One by
+        default: the pairs of most cases are too quick for threads to pay (BENCHMARKS.md).
+    candidates : int
+        Each map's best-ranked others (by a cheap signature,
+        :mod:`fusionkit.methods.consensus.candidates`) that get a full estimate, plus the pairs
+        that close loops; 0: every pair. A fleet of at most ``candidates + 1`` maps has every
+        pair estimated.
+    """
+
+    max_false_merge: float = 0.01
+    null_samples: int = 64
+    null_wide_points: int = 0
+    calibration: float = 7.5
+    wall_correlation: float = 3.0
+    cloud_shift: float = 4.0
+    rival: float = 0.6
+    distinct_cells: float = 6.0
+    rotation_peaks: int = 4
+    translations: int = 3
+    refine_top: int = 16
+    coarse: float = 0.1
+    coarse_side: int = 256
+    use_scans: bool = True
+    virtual_scans: bool = False
+    scan_clusters: int = 6
+    pose_spacing: float = 0.25
+    max_poses: int = 1500
+    max_refine_points: int = 4000
+    coarse_points: int = 1000
+    alias_peaks: int = 6
+    pso_refine: bool = True
+    pso_top: int = 4
+    fallback: bool = True
+    fallback_step: float = 2.0
+    fallback_rotations: int = 12
+    null_margin: float = 2.0
+    loop_cells: float = 8.0
+    final_check: bool = True
+    pose_graph: bool = True
+    threads: int = 1
+    candidates: int = 4
+
+    def __post_init__(self):
+        v = self.max_false_merge
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < 1.0):
+            raise InputError(f"max_false_merge is a risk in (0, 1) (e.g. 0.01), got {v!r}")
+        if not (isinstance(self.calibration, (int, float)) and math.isfinite(self.calibration)
+                and self.calibration >= 0):
+            raise InputError(f"calibration is a number of decades >= 0, got {self.calibration!r}")
+        if not 0.0 < self.rival <= 1.0:
+            raise InputError(f"rival is a fraction in (0, 1], got {self.rival}")
+        for name in ("scan_clusters", "rotation_peaks", "translations", "refine_top", "max_poses",
+                     "max_refine_points", "coarse_points", "pso_top", "alias_peaks", "coarse_side",
+                     "threads", "null_samples", "fallback_rotations",
+                     "null_wide_points", "candidates"):
+            v = getattr(self, name)
+            least = 0 if name in ("scan_clusters", "alias_peaks", "threads",
+                                  "fallback_rotations", "null_wide_points", "candidates") else (
+                8 if name == "null_samples" else 1)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
+                raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
+        for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells", "fallback_step",
+                     "cloud_shift", "wall_correlation"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"{name} must be a positive number, got {v!r}")
+        v = self.null_margin
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0):
+            raise InputError(f"null_margin is a positive number of decades (inf: never stop "
+                             f"early), got {v!r}")

@@ -1,0 +1,67 @@
+"""The cheaper parts of the consensus method decide as the full ones: the null distribution
+drawn until the decision is settled, the fall-back's rotation sweep a level up the pyramid."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit.errors import InputError
+from fusionkit.mapio import load_map
+from fusionkit.methods.consensus import ConsensusConfig, estimate_pair, prepare_maps
+from fusionkit.methods.consensus._search import evidence_raster, pyramid_rotations
+from fusionkit.methods.peers import crop_pair
+from fusionkit.transform import Transform2D
+
+REPO = Path(__file__).resolve().parents[1]
+REAL = REPO / "maps" / "real"
+if not (REAL / "intel_lab.yaml").is_file():
+    REAL = REPO.parent / "shared" / "maps" / "real"
+
+
+@pytest.fixture(scope="module")
+def intel():
+    return load_map(REAL / "intel_lab.yaml")
+
+
+@pytest.fixture(scope="module")
+def intel_crop(intel):
+    return crop_pair(intel, np.random.default_rng(3), size=200, min_overlap=0.4)
+
+
+def test_a_clear_pair_stops_drawing_wrong_placements_early_with_the_same_decision(intel_crop):
+    quick = estimate_pair(intel_crop.a, intel_crop.b).diagnostics["pair"]
+    full = estimate_pair(intel_crop.a, intel_crop.b,
+                         config=ConsensusConfig(null_margin=math.inf)).diagnostics["pair"]
+    assert quick.accepted and full.accepted
+    assert len(quick.null.fractions) < len(full.null.fractions) == 64
+    assert quick.transform.error_to(full.transform)[0] < intel_crop.a.resolution
+
+
+def test_a_pair_of_two_buildings_is_refused_with_or_without_the_early_stop():
+    a = crop_pair(load_map(REAL / "gatech_ilab.yaml"), np.random.default_rng(0), size=150,
+                  min_overlap=0.4).a
+    b = crop_pair(load_map(REAL / "mit_stata_basement.yaml"), np.random.default_rng(1), size=150,
+                  min_overlap=0.4).a
+    for margin in (5.0, math.inf):
+        assert not estimate_pair(a, b, config=ConsensusConfig(null_margin=margin)).accepted
+
+
+@pytest.mark.parametrize("degrees", [37.0, -121.0, 170.0])
+def test_the_pyramid_sweep_finds_the_rotation_of_a_turned_map(intel_crop, degrees):
+    a, b = prepare_maps([intel_crop.a, intel_crop.b])
+    turn = Transform2D(0.0, 0.0, math.radians(degrees))
+    truth = intel_crop.truth @ turn.inverse            # B's points turned by ``turn`` first
+    pts = turn(b.points)
+    rots = pyramid_rotations(evidence_raster(a), pts, step=math.radians(2.0), count=12)
+    assert any(abs(math.remainder(r - truth.theta, 2 * math.pi)) < math.radians(3) for r in rots)
+
+
+@pytest.mark.parametrize("field, value", [("null_margin", 0.0), ("null_margin", -1.0),
+                                          ("fallback_rotations", -1)])
+def test_bad_settings_of_the_cheaper_parts_are_refused(field, value):
+    with pytest.raises(InputError, match=field):
+        ConsensusConfig(**{field: value})
