@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import contextlib
 import io
-import json
 import signal
 import socket
 import time
@@ -22,6 +21,7 @@ from fusionkit.errors import InputError
 from fusionkit.executor import DaskExecutor, InProcess, LocalProcesses, make_executor, using
 from fusionkit.pipeline import MergeConfig, merge
 from fusionkit.progress import ProgressBar, format_duration
+from test_bench import _strip
 
 CAVE = WorldSpec("cave", builtin="cave")
 OFFICE = WorldSpec("office", builtin="office")
@@ -116,19 +116,6 @@ def test_merge_on_local_processes_equals_the_in_process_merge():
     with deadline(300), LocalProcesses(2) as ex, using(ex):
         there = merge(grids)
     _same_merge(here, there)
-
-
-def _strip(cases):
-    """Bench records without wall times."""
-    out = []
-    for rec in cases:
-        rec = json.loads(json.dumps(rec, default=float))
-        rec.pop("build_seconds")
-        for m in rec["methods"].values():
-            m.pop("seconds")
-            m.pop("seconds_per_pair")
-        out.append(rec)
-    return out
 
 
 def test_bench_on_a_local_cluster_equals_the_in_process_bench(cluster):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 import time
 
 
@@ -40,6 +41,11 @@ class Progress:
         if self.enabled and self._drawn:
             self.stream.write(f"\r{self.title}: done in {time.perf_counter() - self._t0:.1f} s".ljust(100) + "\n")
             self.stream.flush()
+
+
+def paragraphs(*paras: str) -> str:
+    """Help text of several paragraphs, each wrapped to 88 columns."""
+    return "\n\n".join(textwrap.fill(p, 88) for p in paras)
 
 
 def int_range(lo: int, hi: int):

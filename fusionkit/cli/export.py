@@ -3,18 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import textwrap
 import time
 
 from ..io_rosbag import export_rosbag
-from ._common import Progress, float_range
+from ._common import Progress, float_range, paragraphs
 
 __all__ = ["register", "run_rosbag"]
-
-
-def _paragraphs(*paras: str) -> str:
-    """Help text of several paragraphs, each wrapped to 88 columns."""
-    return "\n\n".join(textwrap.fill(p, 88) for p in paras)
 
 
 def register(sub) -> None:
@@ -26,7 +20,7 @@ def register(sub) -> None:
     b = kinds.add_parser(
         "rosbag", help="a run directory (NAME.scans.npz + NAME.yaml per robot) as a ROS bag",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        description=_paragraphs(
+        description=paragraphs(
             "Write every robot of RUN_DIR (NAME.scans.npz, and NAME.yaml when present) as a "
             "ROS bag: per robot /NAME/scan (sensor_msgs/LaserScan, frame NAME/laser), "
             "/NAME/odom (nav_msgs/Odometry: the laser's pose in NAME/map, zero twist), "

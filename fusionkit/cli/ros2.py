@@ -4,15 +4,10 @@ that publishes a recorded run's robot maps as growing topics."""
 from __future__ import annotations
 
 import argparse
-import textwrap
 
-from ._common import float_range, int_range
+from ._common import float_range, int_range, paragraphs
 
 __all__ = ["register"]
-
-
-def _wrap(*paras: str) -> str:
-    return "\n\n".join(textwrap.fill(p, 88) for p in paras)
 
 
 def register(sub) -> None:
@@ -25,7 +20,7 @@ def register(sub) -> None:
     m = kinds.add_parser(
         "merge-node", help="merge the robots' map topics into one latched map topic, live",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        description=_wrap(
+        description=paragraphs(
             "A ROS 2 node named map_merge with multirobot_map_merge's parameters and defaults "
             "(robot_map_topic, robot_namespace, merged_map_topic, world_frame, known_init_poses "
             "with /<robot>/map_merge/init_pose_{x,y,z,yaw}, merging_rate, discovery_rate, "
