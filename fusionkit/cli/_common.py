@@ -75,9 +75,9 @@ def float_range(lo: float, hi: float, *, lo_open: bool = False):
     return parse
 
 
-def add_merge_options(p, method: str | None = None) -> None:
+def add_merge_options(p, method: str | None = None, *, seed_flag: str = "--seed") -> None:
     """The method's settings, shared by ``merge`` and ``run`` (``method``: the command's default
-    method, if not the library's)."""
+    method, if not the library's; ``seed_flag``: the option that sets the merge's seed)."""
     from ..pipeline import METHODS, MergeConfig
     d = MergeConfig()
     method = method or d.method
@@ -93,7 +93,9 @@ def add_merge_options(p, method: str | None = None) -> None:
                    help=f"consensus: the false-merge risk accepted, the expected number of wrong "
                         f"placements that would fit as well as one accepted (default "
                         f"{d.max_false_merge:g}; smaller is safer and merges less)")
-    g.add_argument("--seed", type=int, default=d.seed, help=f"seed of every random step (default {d.seed})")
+    g.add_argument(seed_flag, dest="seed", type=int, default=d.seed,
+                   help=f"seed of every random step{' of the merge' if seed_flag != '--seed' else ''} "
+                        f"(default {d.seed})")
     g.add_argument("--theta", type=float_range(-1, 1), default=d.theta,
                    help=f"Pearson rho above which two unique poses agree (eq. 2; default {d.theta})")
     g.add_argument("--unique-count", type=int_range(1, 100000), default=d.unique_count,

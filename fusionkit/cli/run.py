@@ -46,14 +46,9 @@ def register(sub) -> None:
     p.add_argument("--robots", type=int_range(2, 64), default=5, help="number of robots (default 5)")
     p.add_argument("--poses", type=int_range(10, 1_000_000), default=5000,
                    help="poses per robot (default 5000)")
-    add_merge_options(p, method="spectral-pso")
     # --seed is the simulation's seed, as in `fusionkit simulate`; the merge's is --merge-seed.
     # (--sim-seed, its older name, still works.)
-    seed_action = next(a for a in p._actions if "--seed" in a.option_strings)
-    seed_action.option_strings = ["--merge-seed"]
-    seed_action.help = f"seed of every random step of the merge (default {seed_action.default})"
-    p._option_string_actions.pop("--seed")
-    p._option_string_actions["--merge-seed"] = seed_action
+    add_merge_options(p, method="spectral-pso", seed_flag="--merge-seed")
     p.add_argument("--seed", "--sim-seed", dest="sim_seed", type=int_range(0, 2**63 - 1), default=7,
                    metavar="S", help="seed of the simulation: starts, motion, range noise, drift "
                                      "(default 7; --sim-seed is the same)")
