@@ -73,3 +73,22 @@ def test_peer_confidence_goes_to_the_map_each_link_placed():
     assert all(p.merged for p in res.placements)
     assert conf[0] == 1.0
     assert all(0.9 <= c <= 1.0 for c in conf), conf
+
+
+def test_map_merge_gives_the_same_bits_every_time_in_one_process():
+    # its bundle adjustment has a free gauge (every map moved together): held at the chain's
+    # first map, the same input gives the same transforms, whatever ran before in the process
+    from fusionkit.bench import BenchConfig, WorldSpec, make_case, plan_cases
+    from fusionkit.methods.consensus import ConsensusConfig, prepare_maps
+    from fusionkit.methods.peers.map_merge import estimate_maps
+
+    cfg = BenchConfig(cases=6, robots=(3,), modes=("explore", "crop"), seed=0)
+    worlds = [WorldSpec("office", builtin="office"), WorldSpec("cave", builtin="cave")]
+    grids = list(make_case(plan_cases(worlds, cfg)[0], cfg).grids)
+    seen = set()
+    for _ in range(8):
+        est = estimate_maps(grids, chaining="shipped", reference=0)
+        seen.add(tuple(None if t is None else (t.x.hex(), t.y.hex(), t.theta.hex())
+                       for t in est.transforms))
+        prepare_maps(grids, config=ConsensusConfig(use_scans=False))   # other work between
+    assert len(seen) == 1

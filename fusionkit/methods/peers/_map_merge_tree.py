@@ -145,7 +145,17 @@ def _bundle_adjust(cams, feats, pairs, conf_thresh: float, shipped: bool):
     if not obs:
         return cams
 
+    # Moving every map together changes no residual (a free gauge): left free, the solver
+    # wanders along it and the last digits of its input decide where it stops. The map the
+    # chain started from (at identity) is held where it is, as the result is renormalised to it.
+    fixed = next((k for k, c in enumerate(cams) if np.array_equal(c, np.eye(3))), 0)
+    held = _sim_params(cams[fixed])
+
+    def params(x):
+        return np.concatenate([x[:4 * fixed], held, x[4 * fixed:]])
+
     def residuals(x):
+        x = params(x)
         out = []
         for i, j, pi, pj in obs:
             hi, hj = _sim_matrix(x[4 * i:4 * i + 4]), _sim_matrix(x[4 * j:4 * j + 4])
@@ -154,10 +164,11 @@ def _bundle_adjust(cams, feats, pairs, conf_thresh: float, shipped: bool):
             out.append((pj - pred).ravel())
         return np.concatenate(out)
 
-    x0 = np.concatenate([_sim_params(c) for c in cams])
+    x0 = np.concatenate([_sim_params(c) for k, c in enumerate(cams) if k != fixed])
     if residuals(x0).size < x0.size:   # too few equations for Levenberg-Marquardt
         return cams
     sol = least_squares(residuals, x0, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=1000 * x0.size)
     if not np.all(np.isfinite(sol.x)):
         return cams
-    return [_sim_matrix(sol.x[4 * k:4 * k + 4]) for k in range(n)]
+    x = params(sol.x)
+    return [_sim_matrix(x[4 * k:4 * k + 4]) for k in range(n)]
