@@ -1,7 +1,7 @@
 """Time per pair of the consensus method against map-merge, on the same cases in one process.
 
     python benchmarks/consensus_speed.py [--cases 20] [--seed 5] [--modes crop]
-        [--drift 0.0] [--drift-theta 0.0]
+        [--drift 0.0] [--drift-theta 0.0] [--shipped] [--record FILE] [--profile FILE]
 
 The cases are those of ``fusionkit bench`` (seed ``--seed``) over ../shared/maps/real when it
 stands beside the repository (else maps/real) and the built-in office and warehouse. Every
@@ -10,11 +10,17 @@ compare; a pair is placed right within 2 degrees and 3 cells of the truth. Print
 variant, the pairs placed right, wrong and refused, the median time per pair, the median of
 the per-case ratio to map-merge's time, the ratio of the medians, and the median share of the
 time spent by the fall-back search, and the sum of the times per pair.
+
+``--shipped`` times only the shipped settings against map-merge. ``--record FILE`` writes what
+every variant decided on every case (each map merged or not, its transform, confidence, group
+and reason) as JSON, for :mod:`compare_decisions` to set two runs side by side.
+``--profile FILE`` profiles the shipped variant's merges (``cProfile`` statistics in FILE).
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import json
 import math
 import statistics
@@ -25,14 +31,17 @@ import cv2
 import numba
 import numpy as np
 
+from fusionkit._atomic import write_text_atomic
 from fusionkit.bench import BenchConfig, find_worlds, make_case, plan_cases
 from fusionkit.methods.consensus import ConsensusConfig
 from fusionkit.pipeline import MergeConfig, merge
 
+SHIPPED = "consensus, as shipped"
+
 VARIANTS = {
     "consensus, full null and fall-back": {"null_margin": math.inf, "fallback_rotations": 0},
     "consensus, sequential null": {"fallback_rotations": 0},
-    "consensus, as shipped": {},
+    SHIPPED: {},
     "consensus, null ICP wide gates on 300 points": {"null_wide_points": 300},
 }
 
@@ -54,6 +63,16 @@ def _score(case, spec, transforms, st) -> None:
         st["right" if ok else "wrong"] += 1
 
 
+def decisions(res) -> list:
+    """What a merge decided for each map, in a form that compares across runs."""
+    def tf(t):
+        return None if t is None else [float(t.x), float(t.y), float(t.theta)]
+    return [{"merged": bool(p.merged), "transform": tf(p.transform),
+             "confidence": float(p.confidence), "group": p.group,
+             "group_transform": tf(p.group_transform), "reason": p.reason}
+            for p in res.placements]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=20, help="number of cases (default 20)")
@@ -63,7 +82,17 @@ def main() -> None:
     ap.add_argument("--drift-theta", type=float, default=0.0, help="heading drift, rad per sqrt(m)")
     ap.add_argument("--try", dest="trial", default="", metavar="JSON",
                     help='settings of one more variant, e.g. \'{"coarse_points": 400}\'')
+    ap.add_argument("--shipped", action="store_true",
+                    help="time only the shipped settings against map-merge")
+    ap.add_argument("--record", default="", metavar="FILE",
+                    help="write every variant's decisions on every case to FILE (JSON)")
+    ap.add_argument("--profile", default="", metavar="FILE",
+                    help="profile the shipped variant's merges into FILE (cProfile statistics)")
     args = ap.parse_args()
+    if args.shipped:
+        for name in list(VARIANTS):
+            if name != SHIPPED:
+                del VARIANTS[name]
     if args.trial:
         VARIANTS[f"consensus, {args.trial}"] = json.loads(args.trial)
     root = Path(__file__).resolve().parents[1]
@@ -77,6 +106,8 @@ def main() -> None:
     runs = {v: {"right": 0, "wrong": 0, "refused": 0, "t": [], "fb": []} for v in VARIANTS}
     runs["map-merge"] = {"right": 0, "wrong": 0, "refused": 0, "t": [], "fb": []}
     warm = None
+    record = []
+    prof = cProfile.Profile() if args.profile else None
     for spec in plan_cases(worlds, cfg):
         case = make_case(spec, cfg)
         scans = list(case.scans) if any(s is not None for s in case.scans) else None
@@ -90,12 +121,22 @@ def main() -> None:
             else:
                 config = MergeConfig(seed=spec.seed % 10_000,
                                      consensus=ConsensusConfig(threads=1, **VARIANTS[name]))
+            if prof is not None and name == SHIPPED:
+                prof.enable()
             t0 = time.perf_counter()
             res = merge(list(case.grids), scans=scans, config=config)
             seconds = time.perf_counter() - t0 - res.seconds.get("confidence", 0.0)
+            if prof is not None and name == SHIPPED:
+                prof.disable()
+            record.append({"case": spec.index, "world": spec.world.name, "mode": spec.mode,
+                           "variant": name, "maps": decisions(res)})
             st["t"].append(seconds / (spec.robots - 1))
             st["fb"].append(res.seconds.get("fallback", 0.0) / max(seconds, 1e-9))
             _score(case, spec, res.transforms, st)
+    if args.record:
+        write_text_atomic(args.record, json.dumps(record, indent=1))
+    if prof is not None:
+        prof.dump_stats(args.profile)
     base = runs["map-merge"]["t"]
     print(f"{args.cases} cases, modes {' '.join(args.modes)}, seed {args.seed}, "
           f"drift {args.drift} m and {args.drift_theta} rad per sqrt(m)")

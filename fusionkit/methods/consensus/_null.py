@@ -177,6 +177,9 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     wide = pts
     if 0 < wide_points < len(pts):
         wide = pts[np.linspace(0, len(pts) - 1, wide_points).astype(np.int64)]
+    # the ICP's points divided by the resolution once for all the starts
+    pts_cells = np.ascontiguousarray(pts / a.resolution, np.float64)
+    wide_cells = np.ascontiguousarray(wide / a.resolution, np.float64)
     if len(a.points) and len(pts):
         for _ in range(3 * samples):
             if len(out) >= samples:
@@ -188,10 +191,10 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
             start = Transform2D(float(pa[0] - (c * pb[0] - s * pb[1])),
                                 float(pa[1] - (s * pb[0] + c * pb[1])), th)
             if wide_points:
-                t = refine_icp(a, wide, start, gates=DEFAULT_GATES[:-2])
-                t = refine_icp(a, pts, t, gates=DEFAULT_GATES[-2:])
+                t = refine_icp(a, wide_cells, start, gates=DEFAULT_GATES[:-2], cells=True)
+                t = refine_icp(a, pts_cells, t, gates=DEFAULT_GATES[-2:], cells=True)
             else:
-                t = refine_icp(a, pts, start)
+                t = refine_icp(a, pts_cells, start, cells=True)
             if displacement(t, away_from, box) <= distinct:
                 continue
             out.append((t, verify(a, b, t)))

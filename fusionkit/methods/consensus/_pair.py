@@ -172,13 +172,16 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     if len(thin) > cfg.coarse_points:
         thin = thin[np.linspace(0, len(thin) - 1, cfg.coarse_points).astype(np.int64)]
     settled: list[Transform2D] = []
+    # the same points for every start: divided by the resolution once
+    thin_cells = np.ascontiguousarray(thin / a.resolution, np.float64)
+    refine_cells = np.ascontiguousarray(b.refine_points / a.resolution, np.float64)
 
     def refine(start: Transform2D, source: str, gates=DEFAULT_GATES[:-2]) -> None:
-        t = refine_icp(a, thin, start, gates=gates)
+        t = refine_icp(a, thin_cells, start, gates=gates, cells=True)
         if any(displacement(t, u, box) < res for u in settled):
             return
         settled.append(t)
-        t = refine_icp(a, b.refine_points, t, gates=DEFAULT_GATES[-2:])
+        t = refine_icp(a, refine_cells, t, gates=DEFAULT_GATES[-2:], cells=True)
         if any(displacement(t, c.transform, box) < 2 * res for c in refined):
             return
         refined.append(Candidate(t, verify(a, b, t), source))

@@ -50,12 +50,18 @@ def rigid_fit(src: np.ndarray, dst: np.ndarray) -> Transform2D:
 
 
 @njit
-def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, usable, gates, iterations, min_pairs, settle):
+def _icp_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, min_pairs, settle):
     """ICP in A's cell frame (units: cells). ``pts`` are B's points already in cell units of a
-    frame aligned with A's cells; only points landing on ``usable`` cells (A known) are paired.
-    Returns ``(tx, ty, th, pairs)`` of the final motion."""
-    rows, cols = dist.shape
+    frame aligned with A's cells; only points landing on cells whose ``gated`` distance (the
+    distance to A's nearest wall where A is usable, infinite elsewhere) is within the gate are
+    paired. Returns ``(tx, ty, th, pairs)`` of the final motion.
+
+    Each step visits B's points once: the pairs found are kept (B's point and its wall) for the
+    closed-form fit, which then runs over the pairs alone."""
+    rows, cols = gated.shape
     n = pts.shape[0]
+    src = np.empty((n, 2))
+    dst = np.empty((n, 2))
     pairs = 0
     for g in range(gates.shape[0]):
         gate = gates[g]
@@ -67,17 +73,23 @@ def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, usable, gates, iterations
             dx = 0.0
             dy = 0.0
             m = 0
-            # first pass: centroids of the paired points
+            # the pairs and their centroids
             for k in range(n):
                 x = c * pts[k, 0] - s * pts[k, 1] + tx
                 y = s * pts[k, 0] + c * pts[k, 1] + ty
                 ci = int(math.floor(x))
                 ri = int(math.floor(y))
-                if 0 <= ri < rows and 0 <= ci < cols and usable[ri, ci] and dist[ri, ci] <= gate:
+                if 0 <= ri < rows and 0 <= ci < cols and gated[ri, ci] <= gate:
+                    qx = near_c[ri, ci] + 0.5
+                    qy = near_r[ri, ci] + 0.5
+                    src[m, 0] = pts[k, 0]
+                    src[m, 1] = pts[k, 1]
+                    dst[m, 0] = qx
+                    dst[m, 1] = qy
                     sx += pts[k, 0]
                     sy += pts[k, 1]
-                    dx += near_c[ri, ci] + 0.5
-                    dy += near_r[ri, ci] + 0.5
+                    dx += qx
+                    dy += qy
                     m += 1
             pairs = m
             if m < min_pairs:
@@ -88,18 +100,13 @@ def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, usable, gates, iterations
             dy /= m
             num = 0.0
             den = 0.0
-            for k in range(n):
-                x = c * pts[k, 0] - s * pts[k, 1] + tx
-                y = s * pts[k, 0] + c * pts[k, 1] + ty
-                ci = int(math.floor(x))
-                ri = int(math.floor(y))
-                if 0 <= ri < rows and 0 <= ci < cols and usable[ri, ci] and dist[ri, ci] <= gate:
-                    px = pts[k, 0] - sx
-                    py = pts[k, 1] - sy
-                    qx = near_c[ri, ci] + 0.5 - dx
-                    qy = near_r[ri, ci] + 0.5 - dy
-                    num += px * qy - py * qx
-                    den += px * qx + py * qy
+            for k in range(m):
+                px = src[k, 0] - sx
+                py = src[k, 1] - sy
+                qx = dst[k, 0] - dx
+                qy = dst[k, 1] - dy
+                num += px * qy - py * qx
+                den += px * qx + py * qy
             nth = math.atan2(num, den)
             nc = math.cos(nth)
             ns = math.sin(nth)
@@ -113,12 +120,39 @@ def _icp_kernel(pts, tx, ty, th, dist, near_r, near_c, usable, gates, iterations
     return tx, ty, th, pairs
 
 
+def _gated(a: MapIndex) -> np.ndarray:
+    """A's distance to its nearest wall (cells) where another map's walls can be paired with
+    it (``usable``), infinite elsewhere: one look-up tells whether a point pairs at a gate.
+    Kept in A's ``cache``."""
+    g = a.cache.get("gated")
+    if g is None:
+        g = np.where(a.usable.astype(bool), a.dist, np.float32(np.inf)).astype(np.float32)
+        a.cache["gated"] = g
+    return g
+
+
 def _to_cells(a: MapIndex, t: Transform2D) -> Transform2D:
     """``t`` (B map frame -> A map frame, m) as a motion into A's cell frame, in cells, for
     points given in B's map frame divided by the resolution."""
-    local = a.grid.origin_transform.inverse @ t
+    inv = a.cache.get("origin_inverse")
+    if inv is None:
+        inv = a.cache["origin_inverse"] = a.grid.origin_transform.inverse
+    local = inv @ t
     res = a.resolution
     return Transform2D(local.x / res, local.y / res, local.theta)
+
+
+def _in_cells(index: MapIndex, points: np.ndarray, resolution: float) -> np.ndarray:
+    """``points`` (m) divided by ``resolution``, contiguous; for the map's own wall points
+    (``index.points``, ``index.refine_points``) kept in its ``cache``, as every check and
+    refinement of its pairs uses them."""
+    if points is index.points or points is index.refine_points:
+        key = ("cells", "points" if points is index.points else "refine", resolution)
+        got = index.cache.get(key)
+        if got is None:
+            got = index.cache[key] = np.ascontiguousarray(points / resolution, np.float64)
+        return got
+    return np.ascontiguousarray(points / resolution, np.float64)
 
 
 def _from_cells(a: MapIndex, t: Transform2D) -> Transform2D:
@@ -127,7 +161,7 @@ def _from_cells(a: MapIndex, t: Transform2D) -> Transform2D:
 
 
 def refine_icp(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
-               gates=DEFAULT_GATES, iterations: int = 10) -> Transform2D:
+               gates=DEFAULT_GATES, iterations: int = 10, cells: bool = False) -> Transform2D:
     """Iterative closest points from ``start`` (B -> A) with pairs read off A's distance field.
 
     Only B's points that land where A is known are paired: a wall of B in A's unexplored space
@@ -144,13 +178,16 @@ def refine_icp(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
     gates : sequence of float
         Successive pairing distances (cells of A), each used for up to ``iterations`` steps
         (fewer when the motion settles below a twentieth of a cell).
+    cells : bool
+        Whether ``points_b`` are already divided by A's resolution (contiguous float64), as
+        callers refining many starts with the same points pass them.
     """
     if len(points_b) == 0:
         return start
     c = _to_cells(a, start)
-    pts = np.ascontiguousarray(points_b / a.resolution, np.float64)
-    tx, ty, th, _ = _icp_kernel(pts, c.x, c.y, c.theta, a.dist, a.nearest[0], a.nearest[1],
-                                a.usable, np.asarray(gates, np.float64), int(iterations), 10, 0.05)
+    pts = points_b if cells else np.ascontiguousarray(points_b / a.resolution, np.float64)
+    tx, ty, th, _ = _icp_kernel(pts, c.x, c.y, c.theta, _gated(a), a.nearest[0], a.nearest[1],
+                                np.asarray(gates, np.float64), int(iterations), 10, 0.05)
     return _from_cells(a, Transform2D(tx, ty, th))
 
 
@@ -306,13 +343,15 @@ def _count_kernel(pts, tx, ty, th, known, near, clear):
     return n, m, bad
 
 
-def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D) -> tuple[int, int, int]:
+def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D,
+             b: MapIndex | None = None) -> tuple[int, int, int]:
     """For B's walls moved by ``t``: how many land on A's known cells (or beside A's walls),
-    how many beside A's walls, how many on A's clear free space."""
+    how many beside A's walls, how many on A's clear free space (``b``: the map the points
+    belong to, whose cache keeps them in cells)."""
     if len(points_b) == 0:
         return 0, 0, 0
     c = _to_cells(a, t)
-    pts = points_b / a.resolution
+    pts = _in_cells(b, points_b, a.resolution) if b is not None else points_b / a.resolution
     n, m, bad = _count_kernel(pts, c.x, c.y, c.theta, a.known, a.near, a.clear)
     return int(n), int(m), int(bad)
 
@@ -328,8 +367,8 @@ def _one_way_numpy(a: MapIndex, points_b: np.ndarray, t: Transform2D) -> tuple[i
 
 def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:
     """Check the transform ``t`` (B's frame -> A's frame) on both maps' walls."""
-    n_ab, near_ab, bad_ab = _one_way(a, b.points, t)
-    n_ba, near_ba, bad_ba = _one_way(b, a.points, t.inverse)
+    n_ab, near_ab, bad_ab = _one_way(a, b.points, t, b)
+    n_ba, near_ba, bad_ba = _one_way(b, a.points, t.inverse, a)
     f_ab = near_ab / n_ab if n_ab else 0.0
     f_ba = near_ba / n_ba if n_ba else 0.0
     total = n_ab + n_ba
