@@ -46,7 +46,7 @@ from ._index import MapIndex, index_map
 from ._pair import Candidate, ConsensusConfig, PairResult, corners, estimate_indexed
 from ._search import evidence_raster, orientation_histogram
 from ._null import NullModel, null_model
-from ._verify import Check, refine_icp, refine_pso, verify
+from ._verify import Check, forget_pairs, refine_icp, refine_pso, verify
 
 __all__ = ["ConsensusConfig", "Check", "Candidate", "PairResult", "GraphResult", "MapsResult",
            "MapIndex", "prepare_maps", "estimate_pair", "estimate_maps", "verify", "refine_icp",
@@ -249,4 +249,6 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
             pairs.update(estimate(redo, exhaustive=True))
             graph = solve_graph(pairs, indexes, reference, config, boxes)
             seconds["fallback"] = time.perf_counter() - t0
+        for ix in indexes:
+            forget_pairs(ix)
     return MapsResult(pairs, graph, tuple(indexes), seconds)

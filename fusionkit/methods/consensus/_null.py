@@ -15,7 +15,8 @@ import numpy as np
 
 from ...transform import Transform2D
 from ._index import MapIndex
-from ._verify import DEFAULT_GATES, displacement, refine_icp, verify
+from ._verify import (DEFAULT_GATES, displacement, pair_memo, points_key, refine_memo,
+                      verify_memo)
 
 __all__ = ["NullModel", "null_model", "search_tests"]
 
@@ -180,6 +181,10 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     # the ICP's points divided by the resolution once for all the starts
     pts_cells = np.ascontiguousarray(pts / a.resolution, np.float64)
     wide_cells = np.ascontiguousarray(wide / a.resolution, np.float64)
+    # a pair searched again (the fall-back) draws the same starts again when its best
+    # placement and seed are the same: their refinements and checks are kept
+    memo = pair_memo(a, b)
+    pts_name, wide_name = points_key(pts_cells), points_key(wide_cells)
     if len(a.points) and len(pts):
         for _ in range(3 * samples):
             if len(out) >= samples:
@@ -191,13 +196,13 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
             start = Transform2D(float(pa[0] - (c * pb[0] - s * pb[1])),
                                 float(pa[1] - (s * pb[0] + c * pb[1])), th)
             if wide_points:
-                t = refine_icp(a, wide_cells, start, gates=DEFAULT_GATES[:-2], cells=True)
-                t = refine_icp(a, pts_cells, t, gates=DEFAULT_GATES[-2:], cells=True)
+                t = refine_memo(memo, a, wide_cells, wide_name, start, DEFAULT_GATES[:-2])
+                t = refine_memo(memo, a, pts_cells, pts_name, t, DEFAULT_GATES[-2:])
             else:
-                t = refine_icp(a, pts_cells, start, cells=True)
+                t = refine_memo(memo, a, pts_cells, pts_name, start, DEFAULT_GATES)
             if displacement(t, away_from, box) <= distinct:
                 continue
-            out.append((t, verify(a, b, t)))
+            out.append((t, verify_memo(memo, a, b, t)))
             if (settled is not None and len(out) >= least and len(out) % batch == 0
                     and len(out) < samples):
                 model = _fit(out, a.resolution, tests, calibration, correlation)

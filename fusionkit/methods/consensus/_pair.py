@@ -16,8 +16,8 @@ from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
 from ._null import NullModel, null_model
-from ._verify import (DEFAULT_GATES, Check, displacement, refine_cloud, refine_icp,
-                      refine_pso, verify)
+from ._verify import (DEFAULT_GATES, Check, displacement, pair_memo, points_key, refine_cloud,
+                      refine_icp, refine_memo, refine_pso, verify, verify_memo)
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
 
@@ -157,9 +157,21 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     wall: list[tuple[float, Transform2D]] = []
     head = set(rots[: 2 * cfg.rotation_peaks + 2])
     corr = Correlator(evidence_a, b.points)
+    memo = pair_memo(a, b)
+
+    def translations(theta: float, count: int, suppress: float = 1.0) -> list:
+        # the correlation at a rotation depends on nothing else: the fall-back meets the
+        # rotations of the first search again
+        key = ("translations", id(evidence_a), theta, count, suppress)
+        got = memo.get(key)
+        if got is None or got[0] is not evidence_a:
+            got = memo[key] = (evidence_a, corr.translations(theta, count=count,
+                                                             suppress=suppress))
+        return got[1]
+
     for th in rots:
         count = cfg.translations if th in head or (exhaustive and cfg.fallback_rotations) else 2
-        wall += [(s, t) for t, s in corr.translations(th, count=count)]
+        wall += [(s, t) for t, s in translations(th, count)]
     wall.sort(key=lambda st: -st[0])
     starts += [(t, "walls") for _, t in wall[: cfg.refine_top * (3 if exhaustive else 1)]]
 
@@ -175,16 +187,17 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     # the same points for every start: divided by the resolution once
     thin_cells = np.ascontiguousarray(thin / a.resolution, np.float64)
     refine_cells = np.ascontiguousarray(b.refine_points / a.resolution, np.float64)
+    thin_name, refine_name = points_key(thin_cells), points_key(refine_cells)
 
     def refine(start: Transform2D, source: str, gates=DEFAULT_GATES[:-2]) -> None:
-        t = refine_icp(a, thin_cells, start, gates=gates, cells=True)
+        t = refine_memo(memo, a, thin_cells, thin_name, start, gates)
         if any(displacement(t, u, box) < res for u in settled):
             return
         settled.append(t)
-        t = refine_icp(a, refine_cells, t, gates=DEFAULT_GATES[-2:], cells=True)
+        t = refine_memo(memo, a, refine_cells, refine_name, t, DEFAULT_GATES[-2:])
         if any(displacement(t, c.transform, box) < 2 * res for c in refined):
             return
-        refined.append(Candidate(t, verify(a, b, t), source))
+        refined.append(Candidate(t, verify_memo(memo, a, b, t), source))
 
     for start, source in starts:
         refine(start, source)
@@ -195,8 +208,8 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         # look for such aliases of the best placement in its own correlation surface: each one
         # found that fits nearly as well makes the pair ambiguous instead of wrongly sure
         best_t = refined[0].transform
-        for start, _ in corr.translations(best_t.theta, count=cfg.alias_peaks,
-                                          suppress=2 * cfg.distinct_cells * res):
+        for start, _ in translations(best_t.theta, cfg.alias_peaks,
+                                     2 * cfg.distinct_cells * res):
             refine(start, "aliases", gates=DEFAULT_GATES[1:-2])
         refined.sort(key=lambda c: -c.rank)
     seconds = time.perf_counter() - t0

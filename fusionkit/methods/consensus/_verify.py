@@ -131,15 +131,43 @@ def _gated(a: MapIndex) -> np.ndarray:
     return g
 
 
-def _to_cells(a: MapIndex, t: Transform2D) -> Transform2D:
-    """``t`` (B map frame -> A map frame, m) as a motion into A's cell frame, in cells, for
-    points given in B's map frame divided by the resolution."""
-    inv = a.cache.get("origin_inverse")
-    if inv is None:
-        inv = a.cache["origin_inverse"] = a.grid.origin_transform.inverse
-    local = inv @ t
+def _wrap(theta: float) -> float:
+    # wrap_angle for a float, as Transform2D applies it
+    return (theta + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _origin(a: MapIndex) -> tuple:
+    """A's origin transform and its inverse, with their cosines and sines (kept in A's
+    ``cache``: every refinement and check of A's pairs uses them)."""
+    got = a.cache.get("origin")
+    if got is None:
+        o = a.grid.origin_transform
+        inv = o.inverse
+        got = a.cache["origin"] = (o, math.cos(o.theta), math.sin(o.theta),
+                                   inv, math.cos(inv.theta), math.sin(inv.theta))
+    return got
+
+
+def _to_cells(a: MapIndex, t: Transform2D) -> tuple[float, float, float]:
+    """``t`` (B map frame -> A map frame, m) as a motion ``(x, y, theta)`` into A's cell frame,
+    in cells, for points given in B's map frame divided by the resolution.
+
+    The arithmetic of ``origin_transform.inverse @ t`` with the translation divided by the
+    resolution, written out (transforms are made in the inner loops of the search)."""
+    _, _, _, inv, c, s = _origin(a)
     res = a.resolution
-    return Transform2D(local.x / res, local.y / res, local.theta)
+    x = c * t.x - s * t.y + inv.x
+    y = s * t.x + c * t.y + inv.y
+    return x / res, y / res, _wrap(_wrap(inv.theta + t.theta))
+
+
+def _from_cells(a: MapIndex, tx: float, ty: float, th: float) -> Transform2D:
+    """The motion ``(tx, ty, th)`` in A's cell frame back to B map frame -> A map frame
+    (``origin_transform @ Transform2D(tx * res, ty * res, th)``, written out)."""
+    o, c, s, _, _, _ = _origin(a)
+    res = a.resolution
+    x, y = tx * res, ty * res
+    return Transform2D(c * x - s * y + o.x, s * x + c * y + o.y, o.theta + _wrap(th))
 
 
 def _in_cells(index: MapIndex, points: np.ndarray, resolution: float) -> np.ndarray:
@@ -155,9 +183,53 @@ def _in_cells(index: MapIndex, points: np.ndarray, resolution: float) -> np.ndar
     return np.ascontiguousarray(points / resolution, np.float64)
 
 
-def _from_cells(a: MapIndex, t: Transform2D) -> Transform2D:
-    res = a.resolution
-    return a.grid.origin_transform @ Transform2D(t.x * res, t.y * res, t.theta)
+def pair_memo(a: MapIndex, b: MapIndex) -> dict:
+    """What has been computed for the pair (B placed in A) and will be asked again: the
+    refinements of the starts and the checks of their results, keyed by what they depend on.
+    A pair searched again exhaustively (the fall-back) meets most of its first search's
+    starts, and the null distribution its first draws, again. Kept in A's ``cache`` until
+    :func:`forget_pairs`."""
+    key = ("pairs", id(b))
+    got = a.cache.get(key)
+    if got is None or got[0] is not b:
+        got = a.cache[key] = (b, {})
+    return got[1]
+
+
+def forget_pairs(a: MapIndex) -> None:
+    """Drop what :func:`pair_memo` kept for A's pairs."""
+    for key in [k for k in a.cache if isinstance(k, tuple) and k and k[0] == "pairs"]:
+        a.cache.pop(key, None)
+
+
+def points_key(points: np.ndarray) -> tuple:
+    """A key that tells point sets apart in a :func:`pair_memo`."""
+    return (points.shape, hash(np.ascontiguousarray(points).tobytes()))
+
+
+def _key(t: Transform2D) -> tuple:
+    return (t.x, t.y, t.theta)
+
+
+def refine_memo(memo: dict, a: MapIndex, points: np.ndarray, name: tuple, start: Transform2D,
+                gates) -> Transform2D:
+    """:func:`refine_icp` of ``points`` (already in A's cells; ``name``, their
+    :func:`points_key`, tells them apart in the ``memo``) from ``start``, computed once per
+    start."""
+    key = ("icp", name, _key(start), tuple(gates))
+    got = memo.get(key)
+    if got is None:
+        got = memo[key] = refine_icp(a, points, start, gates=gates, cells=True)
+    return got
+
+
+def verify_memo(memo: dict, a: MapIndex, b: MapIndex, t: Transform2D) -> "Check":
+    """:func:`verify` of ``t``, computed once per placement."""
+    key = ("check", _key(t))
+    got = memo.get(key)
+    if got is None:
+        got = memo[key] = verify(a, b, t)
+    return got
 
 
 def refine_icp(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
@@ -184,11 +256,11 @@ def refine_icp(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
     """
     if len(points_b) == 0:
         return start
-    c = _to_cells(a, start)
+    cx, cy, cth = _to_cells(a, start)
     pts = points_b if cells else np.ascontiguousarray(points_b / a.resolution, np.float64)
-    tx, ty, th, _ = _icp_kernel(pts, c.x, c.y, c.theta, _gated(a), a.nearest[0], a.nearest[1],
+    tx, ty, th, _ = _icp_kernel(pts, cx, cy, cth, _gated(a), a.nearest[0], a.nearest[1],
                                 np.asarray(gates, np.float64), int(iterations), 10, 0.05)
-    return _from_cells(a, Transform2D(tx, ty, th))
+    return _from_cells(a, float(tx), float(ty), float(th))
 
 
 def refine_icp_numpy(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
@@ -350,9 +422,9 @@ def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D,
     belong to, whose cache keeps them in cells)."""
     if len(points_b) == 0:
         return 0, 0, 0
-    c = _to_cells(a, t)
+    cx, cy, cth = _to_cells(a, t)
     pts = _in_cells(b, points_b, a.resolution) if b is not None else points_b / a.resolution
-    n, m, bad = _count_kernel(pts, c.x, c.y, c.theta, a.known, a.near, a.clear)
+    n, m, bad = _count_kernel(pts, cx, cy, cth, a.known, a.near, a.clear)
     return int(n), int(m), int(bad)
 
 
