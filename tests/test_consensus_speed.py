@@ -65,3 +65,52 @@ def test_the_pyramid_sweep_finds_the_rotation_of_a_turned_map(intel_crop, degree
 def test_bad_settings_of_the_cheaper_parts_are_refused(field, value):
     with pytest.raises(InputError, match=field):
         ConsensusConfig(**{field: value})
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_padded_forward_transform_gives_the_numbers_of_rfft2(seed):
+    from scipy import fft as sfft
+
+    from fusionkit.methods.consensus._search import _rfft2_padded
+    rng = np.random.default_rng(seed)
+    h, w = (int(v) for v in rng.integers(3, 200, 2))
+    shape = (sfft.next_fast_len(h + int(rng.integers(1, 200)), real=True),
+             sfft.next_fast_len(w + int(rng.integers(1, 200)), real=True))
+    img = rng.standard_normal((h, w)).astype(np.float32)
+    assert np.array_equal(_rfft2_padded(img, shape), sfft.rfft2(img, s=shape, workers=1))
+
+
+def _same(p, q) -> bool:
+    return (p.accepted == q.accepted and p.ambiguous == q.ambiguous and p.nfa == q.nfa
+            and p.reason == q.reason and (p.transform is None) == (q.transform is None)
+            and (p.transform is None or (p.transform.x, p.transform.y, p.transform.theta)
+                 == (q.transform.x, q.transform.y, q.transform.theta)))
+
+
+def test_a_pair_searched_again_exhaustively_decides_as_a_fresh_exhaustive_search(intel_crop):
+    from fusionkit.methods.consensus._pair import estimate_indexed
+    from fusionkit.methods.consensus._search import orientation_histogram
+
+    cfg = ConsensusConfig()
+
+    def search(a, b, exhaustive):
+        return estimate_indexed(a, b, cfg, hist_a=orientation_histogram(a),
+                                hist_b=orientation_histogram(b), evidence_a=evidence_raster(a),
+                                seed=4, exhaustive=exhaustive)
+
+    a, b = prepare_maps([intel_crop.a, intel_crop.b])
+    search(a, b, False)                       # what the first search keeps for the pair
+    again = search(a, b, True)
+    fresh = search(*prepare_maps([intel_crop.a, intel_crop.b]), True)
+    assert again.transform is not None and again.accepted
+    assert _same(again, fresh)
+    assert [c.transform for c in again.refined] == [c.transform for c in fresh.refined]
+
+
+def test_merging_leaves_nothing_of_its_pairs_in_the_maps(intel_crop):
+    from fusionkit.methods.consensus import estimate_maps
+
+    res = estimate_maps([intel_crop.a, intel_crop.b])
+    assert res.transforms[1] is not None
+    for ix in res.indexes:
+        assert not any(isinstance(k, tuple) and k[0] == "pairs" for k in ix.cache)

@@ -185,6 +185,7 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     # placement and seed are the same: their refinements and checks are kept
     memo = pair_memo(a, b)
     pts_name, wide_name = points_key(pts_cells), points_key(wide_cells)
+    corners_b = np.asarray(box, float).tolist()
     if len(a.points) and len(pts):
         for _ in range(3 * samples):
             if len(out) >= samples:
@@ -200,7 +201,7 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
                 t = refine_memo(memo, a, pts_cells, pts_name, t, DEFAULT_GATES[-2:])
             else:
                 t = refine_memo(memo, a, pts_cells, pts_name, start, DEFAULT_GATES)
-            if displacement(t, away_from, box) <= distinct:
+            if displacement(t, away_from, corners_b) <= distinct:
                 continue
             out.append((t, verify_memo(memo, a, b, t)))
             if (settled is not None and len(out) >= least and len(out) % batch == 0

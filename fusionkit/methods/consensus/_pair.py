@@ -189,13 +189,15 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     refine_cells = np.ascontiguousarray(b.refine_points / a.resolution, np.float64)
     thin_name, refine_name = points_key(thin_cells), points_key(refine_cells)
 
+    corners_b = box.tolist()
+
     def refine(start: Transform2D, source: str, gates=DEFAULT_GATES[:-2]) -> None:
         t = refine_memo(memo, a, thin_cells, thin_name, start, gates)
-        if any(displacement(t, u, box) < res for u in settled):
+        if any(displacement(t, u, corners_b) < res for u in settled):
             return
         settled.append(t)
         t = refine_memo(memo, a, refine_cells, refine_name, t, DEFAULT_GATES[-2:])
-        if any(displacement(t, c.transform, box) < 2 * res for c in refined):
+        if any(displacement(t, c.transform, corners_b) < 2 * res for c in refined):
             return
         refined.append(Candidate(t, verify_memo(memo, a, b, t), source))
 

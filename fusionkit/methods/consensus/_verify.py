@@ -449,14 +449,17 @@ def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:
                  (bad_ab + bad_ba) / total if total else 1.0)
 
 
-def displacement(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
-    """Largest distance (m) between where ``t1`` and ``t2`` put the points ``pts``."""
+def displacement(t1: Transform2D, t2: Transform2D, pts) -> float:
+    """Largest distance (m) between where ``t1`` and ``t2`` put the points ``pts`` (an
+    ``(N, 2)`` array, or a list of ``[x, y]`` for callers comparing many placements)."""
     # the points move by t1 - t2 = (R1 - R2) p + (d1 - d2): plain arithmetic, as this is
     # called for every two candidates of a pair
     a = math.cos(t1.theta) - math.cos(t2.theta)
     b = math.sin(t1.theta) - math.sin(t2.theta)
     ex, ey = t1.x - t2.x, t1.y - t2.y
     worst = 0.0
-    for x, y in pts.tolist():
-        worst = max(worst, (a * x - b * y + ex) ** 2 + (b * x + a * y + ey) ** 2)
+    for x, y in (pts if isinstance(pts, list) else pts.tolist()):
+        d = (a * x - b * y + ex) ** 2 + (b * x + a * y + ey) ** 2
+        if d > worst:   # max(worst, d), without the call
+            worst = d
     return math.sqrt(worst)
