@@ -114,3 +114,20 @@ def test_merging_leaves_nothing_of_its_pairs_in_the_maps(intel_crop):
     assert res.transforms[1] is not None
     for ix in res.indexes:
         assert not any(isinstance(k, tuple) and k[0] == "pairs" for k in ix.cache)
+
+
+@pytest.mark.parametrize("degrees", [0.0, 33.0, -97.0, 180.0])
+def test_the_raster_kernel_puts_the_walls_where_the_plain_computation_does(intel_crop, degrees):
+    from fusionkit.methods.consensus._search import Correlator, _raster, _turned_cells
+
+    a, b = prepare_maps([intel_crop.a, intel_crop.b])
+    ev = evidence_raster(a)
+    span = Correlator(ev, b.points).span
+    theta = math.radians(degrees)
+    cells = _turned_cells(ev, b.points, theta)
+    lo = cells.min(axis=0)
+    want = np.zeros((span, span), np.float32)
+    want[np.minimum(cells[:, 1] - lo[1], span - 1), np.minimum(cells[:, 0] - lo[0], span - 1)] = 1
+    img, got_lo = _raster(ev, b.points, theta, span)
+    assert np.array_equal(got_lo, lo)
+    assert np.array_equal(img, want)

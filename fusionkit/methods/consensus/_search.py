@@ -25,6 +25,7 @@ import numpy as np
 from scipy import fft as sfft
 from scipy import ndimage
 
+from ..._jit import njit
 from ...transform import Transform2D
 from ._index import MapIndex
 
@@ -132,6 +133,45 @@ def _turned_cells(ev: EvidenceRaster, points_b: np.ndarray, theta: float) -> np.
     return np.floor(q0).astype(np.int64)
 
 
+@njit
+def _raster_kernel(pts, c1, s1, c2, s2, ox, oy, cell, span):
+    """B's points turned by ``(c1, s1)`` (cos, sin), then moved by A's inverse origin
+    ``(c2, s2, ox, oy)`` into A's cell frame, divided by the coarse ``cell`` and floored, as
+    :func:`_turned_cells` computes them; returns the ``span`` x ``span`` raster of those cells
+    (from their least column and row, clipped to the raster) and that least ``(col, row)``."""
+    n = pts.shape[0]
+    cols = np.empty(n, np.int64)
+    rows = np.empty(n, np.int64)
+    lo_c = 0
+    lo_r = 0
+    for k in range(n):
+        x = c1 * pts[k, 0] - s1 * pts[k, 1] + 0.0
+        y = s1 * pts[k, 0] + c1 * pts[k, 1] + 0.0
+        qx = (c2 * x - s2 * y + ox) / cell
+        qy = (s2 * x + c2 * y + oy) / cell
+        cols[k] = np.int64(math.floor(qx))
+        rows[k] = np.int64(math.floor(qy))
+        if k == 0 or cols[k] < lo_c:
+            lo_c = cols[k]
+        if k == 0 or rows[k] < lo_r:
+            lo_r = rows[k]
+    img = np.zeros((span, span), np.float32)
+    for k in range(n):
+        img[min(rows[k] - lo_r, span - 1), min(cols[k] - lo_c, span - 1)] = 1.0
+    return img, lo_c, lo_r
+
+
+def _raster(ev: EvidenceRaster, points_b: np.ndarray, theta: float, span: int):
+    """``(img, lo)``: B's walls turned by ``theta`` rasterised on A's coarse cells from their
+    least cell ``lo = (col, row)`` (:func:`_turned_cells` and the raster, in one pass)."""
+    rot = Transform2D(0.0, 0.0, theta)
+    inv = ev.index.grid.origin_transform.inverse
+    img, lo_c, lo_r = _raster_kernel(points_b, math.cos(rot.theta), math.sin(rot.theta),
+                                     math.cos(inv.theta), math.sin(inv.theta), inv.x, inv.y,
+                                     float(ev.cell), int(span))
+    return img, np.array([lo_c, lo_r], np.int64)
+
+
 def _rfft2_padded(img: np.ndarray, shape: tuple) -> np.ndarray:
     """``scipy.fft.rfft2(img, s=shape)`` for an image smaller than ``shape``: the rows'
     transforms run on the image's own rows only (the padding rows are zero, and so are their
@@ -156,18 +196,13 @@ class Correlator:
         self.shape = (sfft.next_fast_len(ha + self.span, real=True),
                       sfft.next_fast_len(wa + self.span, real=True))
         self.fa = _rfft2_padded(ev.values, self.shape)
-        self.points = points_b
+        self.points = np.ascontiguousarray(points_b, np.float64)
 
     def correlate(self, theta: float) -> tuple[np.ndarray, np.ndarray]:
         """``(corr, lo)``: ``corr[dr, dc]`` the summed evidence under B's walls turned by
         ``theta`` with its raster's cell (0, 0) on A's cell ``(lo_y + dr, lo_x + dc)``
         (indices modulo the padded shape)."""
-        cells = _turned_cells(self.ev, self.points, theta)
-        lo = cells.min(axis=0)
-        img = np.zeros((self.span, self.span), np.float32)
-        rr = np.minimum(cells[:, 1] - lo[1], self.span - 1)
-        cc = np.minimum(cells[:, 0] - lo[0], self.span - 1)
-        img[rr, cc] = 1.0
+        img, lo = _raster(self.ev, self.points, theta, self.span)
         fb = _rfft2_padded(img, self.shape)
         return sfft.irfft2(self.fa * np.conj(fb), s=self.shape, workers=1), lo
 
