@@ -56,12 +56,17 @@ def _icp_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, min_p
     distance to A's nearest wall where A is usable, infinite elsewhere) is within the gate are
     paired. Returns ``(tx, ty, th, pairs)`` of the final motion.
 
-    Each step visits B's points once: the pairs found are kept (B's point and its wall) for the
-    closed-form fit, which then runs over the pairs alone."""
+    Each step moves B's points into cells in one loop (which the compiler vectorises), pairs
+    them in a second and keeps the pairs (B's point and its wall) for the closed-form fit,
+    which then runs over the pairs alone."""
     rows, cols = gated.shape
     n = pts.shape[0]
     src = np.empty((n, 2))
     dst = np.empty((n, 2))
+    p0 = np.ascontiguousarray(pts[:, 0])
+    p1 = np.ascontiguousarray(pts[:, 1])
+    cc = np.empty(n, np.int64)
+    rr = np.empty(n, np.int64)
     pairs = 0
     for g in range(gates.shape[0]):
         gate = gates[g]
@@ -73,21 +78,23 @@ def _icp_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, min_p
             dx = 0.0
             dy = 0.0
             m = 0
+            # B's points in A's cells
+            for k in range(n):
+                cc[k] = math.floor(c * p0[k] - s * p1[k] + tx)
+                rr[k] = math.floor(s * p0[k] + c * p1[k] + ty)
             # the pairs and their centroids
             for k in range(n):
-                x = c * pts[k, 0] - s * pts[k, 1] + tx
-                y = s * pts[k, 0] + c * pts[k, 1] + ty
-                ci = int(math.floor(x))
-                ri = int(math.floor(y))
+                ci = cc[k]
+                ri = rr[k]
                 if 0 <= ri < rows and 0 <= ci < cols and gated[ri, ci] <= gate:
                     qx = near_c[ri, ci] + 0.5
                     qy = near_r[ri, ci] + 0.5
-                    src[m, 0] = pts[k, 0]
-                    src[m, 1] = pts[k, 1]
+                    src[m, 0] = p0[k]
+                    src[m, 1] = p1[k]
                     dst[m, 0] = qx
                     dst[m, 1] = qy
-                    sx += pts[k, 0]
-                    sy += pts[k, 1]
+                    sx += p0[k]
+                    sy += p1[k]
                     dx += qx
                     dy += qy
                     m += 1
@@ -401,9 +408,18 @@ def _count_kernel(pts, tx, ty, th, known, near, clear):
     n = 0
     m = 0
     bad = 0
-    for k in range(pts.shape[0]):
-        ci = int(math.floor(c * pts[k, 0] - s * pts[k, 1] + tx))
-        ri = int(math.floor(s * pts[k, 0] + c * pts[k, 1] + ty))
+    # the points' cells in one loop (vectorised), then the look-ups
+    p0 = np.ascontiguousarray(pts[:, 0])
+    p1 = np.ascontiguousarray(pts[:, 1])
+    size = pts.shape[0]
+    cc = np.empty(size, np.int64)
+    rr = np.empty(size, np.int64)
+    for k in range(size):
+        cc[k] = math.floor(c * p0[k] - s * p1[k] + tx)
+        rr[k] = math.floor(s * p0[k] + c * p1[k] + ty)
+    for k in range(size):
+        ci = cc[k]
+        ri = rr[k]
         if 0 <= ri < rows and 0 <= ci < cols:
             if near[ri, ci]:
                 n += 1
