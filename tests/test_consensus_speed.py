@@ -131,3 +131,33 @@ def test_the_raster_kernel_puts_the_walls_where_the_plain_computation_does(intel
     img, got_lo = _raster(ev, b.points, theta, span)
     assert np.array_equal(got_lo, lo)
     assert np.array_equal(img, want)
+
+
+@pytest.mark.parametrize("f", [1, 2, 3, 5])
+def test_pooling_reduces_each_block_as_a_block_reduction_does(f):
+    from fusionkit.methods.consensus._search import _pool
+
+    mask = np.random.default_rng(f).random((37, 52)) < 0.4
+    rr, cc = -(-37 // f) * f, -(-52 // f) * f
+    pad = np.zeros((rr, cc), bool)
+    pad[:37, :52] = mask
+    blocks = pad.reshape(rr // f, f, cc // f, f)
+    assert np.array_equal(_pool(mask, f, "any"), blocks.any(axis=(1, 3)))
+    assert np.array_equal(_pool(mask, f, "all"), blocks.all(axis=(1, 3)))
+
+
+def test_each_cell_is_given_the_wall_of_its_distance_label(intel):
+    import cv2
+
+    from fusionkit.methods.consensus._index import _nearest_walls
+
+    occupied = intel.occupied_mask()
+    dist, nearest = _nearest_walls(occupied)
+    # the plain computation: OpenCV numbers the wall pixels in raster order
+    want, labels = cv2.distanceTransformWithLabels((~occupied).astype(np.uint8), cv2.DIST_L2,
+                                                   cv2.DIST_MASK_PRECISE,
+                                                   labelType=cv2.DIST_LABEL_PIXEL)
+    wr, wc = np.nonzero(occupied)
+    assert np.array_equal(dist, want)
+    assert np.array_equal(nearest[0], wr[labels - 1]) and np.array_equal(nearest[1], wc[labels - 1])
+    assert occupied[nearest[0], nearest[1]].all()

@@ -95,20 +95,32 @@ class MapIndex:
         return ri, ci, inside
 
 
-def _nearest_walls(occupied: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _nearest_walls(occupied: np.ndarray, walls: tuple | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Per cell, the distance (cells) to a nearest occupied cell and that cell's ``(row, col)``.
 
     OpenCV's labelled distance transform (its labels number the wall pixels in raster order);
-    its distances are within half a cell of the exact Euclidean ones.
+    its distances are within half a cell of the exact Euclidean ones. ``walls``: the
+    ``np.nonzero(occupied)`` of the caller, when it has it.
     """
     rows, cols = occupied.shape
     if not occupied.any():
         return (np.full(occupied.shape, np.inf, np.float32), np.zeros((2, rows, cols), np.int32))
     dist, labels = cv2.distanceTransformWithLabels((~occupied).astype(np.uint8), cv2.DIST_L2,
                                                    cv2.DIST_MASK_PRECISE, labelType=cv2.DIST_LABEL_PIXEL)
-    wr, wc = np.nonzero(occupied)
-    lab = labels - 1
-    return dist, np.stack([wr.astype(np.int32)[lab], wc.astype(np.int32)[lab]])
+    wr, wc = np.nonzero(occupied) if walls is None else walls
+    nearest = np.empty((2, rows, cols), np.int32)
+    _label_cells(labels, wr.astype(np.int32), wc.astype(np.int32), nearest)
+    return dist, nearest
+
+
+@njit
+def _label_cells(labels, wr, wc, out):
+    # out[:, i, j] = the (row, col) of wall pixel number labels[i, j] (1-based)
+    for i in range(labels.shape[0]):
+        for j in range(labels.shape[1]):
+            k = labels[i, j] - 1
+            out[0, i, j] = wr[k]
+            out[1, i, j] = wc[k]
 
 
 def first_per_cell(points: np.ndarray, spacing: float) -> np.ndarray:
@@ -182,14 +194,14 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     occupied = tri.occupied_mask()
     known = tri.known_mask()
     free = known & ~occupied
-    dist, nearest = _nearest_walls(occupied)
+    r, c = np.nonzero(occupied)
+    dist, nearest = _nearest_walls(occupied, (r, c))
     occ8 = occupied.astype(np.uint8)
     near = cv2.dilate(occ8, np.ones((3, 3), np.uint8)).astype(bool)
     reach = 2 * clear_cells - 1
     walls_close = cv2.dilate(occ8, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (reach, reach))).astype(bool)
     clear = free & ~walls_close
     usable = (known | near).astype(np.uint8)
-    r, c = np.nonzero(occupied)
     points = tri.cell_to_world(r, c)
     if len(points) > max_refine_points:
         step = len(points) / max_refine_points

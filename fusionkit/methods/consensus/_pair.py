@@ -102,7 +102,9 @@ def corners(index: MapIndex) -> np.ndarray:
 
 
 def _corners(index: MapIndex) -> np.ndarray:
-    r, c = np.nonzero(index.known)
+    # the bounding box from the rows and columns holding a known cell
+    r = np.flatnonzero(index.known.any(axis=1))
+    c = np.flatnonzero(index.known.any(axis=0))
     if r.size == 0:
         r, c = np.array([0, index.grid.rows - 1]), np.array([0, index.grid.cols - 1])
     rr = np.array([r.min(), r.min(), r.max(), r.max()], float)

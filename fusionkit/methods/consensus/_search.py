@@ -40,11 +40,13 @@ def orientation_histogram(index: MapIndex, bins: int = 180, sigma: float = 3.0) 
     slant is a staircase, and the gradient of a sharper raster follows the stairs (biased
     towards the grid's axes by a few degrees) rather than the wall.
     """
-    r, c = np.nonzero(index.occupied)
-    if r.size == 0:
+    rows = np.flatnonzero(index.occupied.any(axis=1))
+    if rows.size == 0:
         return np.full(bins, 1.0 / bins)
+    cols = np.flatnonzero(index.occupied.any(axis=0))
     pad = int(3 * sigma) + 2
-    window = index.occupied[max(r.min() - pad, 0):r.max() + pad + 1, max(c.min() - pad, 0):c.max() + pad + 1]
+    window = index.occupied[max(rows[0] - pad, 0):rows[-1] + pad + 1,
+                            max(cols[0] - pad, 0):cols[-1] + pad + 1]
     occ = cv2.GaussianBlur(window.astype(np.float32), (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
     gy = cv2.Sobel(occ, cv2.CV_32F, 0, 1, ksize=3)
     gx = cv2.Sobel(occ, cv2.CV_32F, 1, 0, ksize=3)
@@ -106,8 +108,17 @@ def _pool(mask: np.ndarray, f: int, how: str) -> np.ndarray:
     rr, cc = -(-r // f) * f, -(-c // f) * f
     pad = np.zeros((rr, cc), mask.dtype)
     pad[:r, :c] = mask
-    blocks = pad.reshape(rr // f, f, cc // f, f)
-    return blocks.any(axis=(1, 3)) if how == "any" else blocks.all(axis=(1, 3))
+    # the f x f cells of each block are f * f strided views of the padded mask, combined
+    # view by view (the same as reducing each block, without a pass per block)
+    out = pad[0::f, 0::f].copy()
+    for i in range(f):
+        for j in range(f):
+            if i or j:
+                if how == "any":
+                    out |= pad[i::f, j::f]
+                else:
+                    out &= pad[i::f, j::f]
+    return out
 
 
 def evidence_raster(index: MapIndex, *, coarse: float = 0.1, max_side: int = 256,
