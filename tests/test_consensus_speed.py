@@ -161,3 +161,18 @@ def test_each_cell_is_given_the_wall_of_its_distance_label(intel):
     assert np.array_equal(dist, want)
     assert np.array_equal(nearest[0], wr[labels - 1]) and np.array_equal(nearest[1], wc[labels - 1])
     assert occupied[nearest[0], nearest[1]].all()
+
+
+def test_the_nearness_of_kept_placements_is_that_of_their_displacement():
+    from fusionkit.methods.consensus._verify import Placements, displacement
+
+    rng = np.random.default_rng(7)
+    box = rng.uniform(-10, 10, (4, 2))
+    kept = [Transform2D(*rng.normal(0, 0.3, 2), rng.normal(0, 0.02)) for _ in range(30)]
+    places = Placements(box)
+    for t in kept:
+        places.add(t)
+    for _ in range(300):
+        t = Transform2D(*rng.normal(0, 0.3, 2), rng.normal(0, 0.02))
+        for limit in (0.05, 0.2, 0.5):
+            assert places.near(t, limit) == any(displacement(t, u, box) < limit for u in kept)

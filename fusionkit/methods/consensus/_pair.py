@@ -16,8 +16,8 @@ from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
 from ._null import NullModel, null_model
-from ._verify import (DEFAULT_GATES, Check, displacement, pair_memo, points_key, refine_cloud,
-                      refine_icp, refine_memo, refine_pso, verify, verify_memo)
+from ._verify import (DEFAULT_GATES, Check, Placements, displacement, pair_memo, points_key,
+                      refine_cloud, refine_icp, refine_memo, refine_pso, verify, verify_memo)
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
 
@@ -193,14 +193,19 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
 
     corners_b = box.tolist()
 
+    wide_ends = Placements(corners_b)       # where the wide stage of each start ended
+    kept = Placements(corners_b)            # the refined candidates' placements
+
     def refine(start: Transform2D, source: str, gates=DEFAULT_GATES[:-2]) -> None:
         t = refine_memo(memo, a, thin_cells, thin_name, start, gates)
-        if any(displacement(t, u, corners_b) < res for u in settled):
+        if wide_ends.near(t, res):
             return
+        wide_ends.add(t)
         settled.append(t)
         t = refine_memo(memo, a, refine_cells, refine_name, t, DEFAULT_GATES[-2:])
-        if any(displacement(t, c.transform, corners_b) < 2 * res for c in refined):
+        if kept.near(t, 2 * res):
             return
+        kept.add(t)
         refined.append(Candidate(t, verify_memo(memo, a, b, t), source))
 
     for start, source in starts:

@@ -465,6 +465,37 @@ def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:
                  (bad_ab + bad_ba) / total if total else 1.0)
 
 
+class Placements:
+    """Placements kept to tell whether a new one is within a distance of any of them (as
+    :func:`displacement` measures it at ``pts``), for the many starts of a search: each
+    kept with its rotation's cosine and sine, and one point's move, a lower bound of the
+    largest, set aside those clearly farther away before the full measure."""
+
+    def __init__(self, pts):
+        self.pts = pts if isinstance(pts, list) else np.asarray(pts, float).tolist()
+        self.kept: list = []
+
+    def add(self, t: Transform2D) -> None:
+        self.kept.append((math.cos(t.theta), math.sin(t.theta), t))
+
+    def near(self, t: Transform2D, limit: float) -> bool:
+        """``any(displacement(t, u, pts) < limit for u in kept)``."""
+        if not self.pts:
+            return any(displacement(t, u, self.pts) < limit for _, _, u in self.kept)
+        ct, st = math.cos(t.theta), math.sin(t.theta)
+        x, y = self.pts[0]
+        far = 4.0 * limit * limit
+        for cu, su, u in self.kept:
+            a = ct - cu
+            b = st - su
+            # the first point's move: when it alone is over twice the limit, so is the largest
+            if (a * x - b * y + t.x - u.x) ** 2 + (b * x + a * y + t.y - u.y) ** 2 > far:
+                continue
+            if displacement(t, u, self.pts) < limit:
+                return True
+        return False
+
+
 def displacement(t1: Transform2D, t2: Transform2D, pts) -> float:
     """Largest distance (m) between where ``t1`` and ``t2`` put the points ``pts`` (an
     ``(N, 2)`` array, or a list of ``[x, y]`` for callers comparing many placements)."""
