@@ -398,11 +398,12 @@ class Check:
 
 
 @njit
-def _count_kernel(pts, tx, ty, th, known, near, clear):
+def _count_kernel(pts, tx, ty, th, state):
     """For points (cells of a frame aligned with A's cells) moved by ``(tx, ty, th)``: how many
     land on A's known cells or beside its walls, how many beside its walls, how many on its
-    clear free space."""
-    rows, cols = known.shape
+    clear free space. ``state``: per cell, bit 0 beside a wall, bit 1 known, bit 2 clear
+    (:func:`_states`), one look-up per point."""
+    rows, cols = state.shape
     c = math.cos(th)
     s = math.sin(th)
     n = 0
@@ -421,14 +422,23 @@ def _count_kernel(pts, tx, ty, th, known, near, clear):
         ci = cc[k]
         ri = rr[k]
         if 0 <= ri < rows and 0 <= ci < cols:
-            if near[ri, ci]:
-                n += 1
-                m += 1
-            elif known[ri, ci]:
-                n += 1
-            if clear[ri, ci]:
-                bad += 1
+            st = state[ri, ci]
+            near = st & 1
+            n += near | ((st >> 1) & 1)
+            m += near
+            bad += (st >> 2) & 1
     return n, m, bad
+
+
+def _states(a: MapIndex) -> np.ndarray:
+    """A's cells as bits: 1 beside a wall (``near``), 2 known, 4 clear free space (kept in
+    A's ``cache``)."""
+    st = a.cache.get("states")
+    if st is None:
+        st = (a.near.astype(np.uint8) | (a.known.astype(np.uint8) << 1)
+              | (a.clear.astype(np.uint8) << 2))
+        a.cache["states"] = st
+    return st
 
 
 def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D,
@@ -440,7 +450,7 @@ def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D,
         return 0, 0, 0
     cx, cy, cth = _to_cells(a, t)
     pts = _in_cells(b, points_b, a.resolution) if b is not None else points_b / a.resolution
-    n, m, bad = _count_kernel(pts, cx, cy, cth, a.known, a.near, a.clear)
+    n, m, bad = _count_kernel(pts, cx, cy, cth, _states(a))
     return int(n), int(m), int(bad)
 
 
