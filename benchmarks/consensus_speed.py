@@ -1,7 +1,8 @@
 """Time per pair of the consensus method against map-merge, on the same cases in one process.
 
     python benchmarks/consensus_speed.py [--cases 20] [--seed 5] [--modes crop]
-        [--drift 0.0] [--drift-theta 0.0] [--shipped] [--record FILE] [--profile FILE]
+        [--drift 0.0] [--drift-theta 0.0] [--worlds NAME ...] [--robots 2 3 4 5]
+        [--shipped] [--record FILE] [--profile FILE]
 
 The cases are those of ``fusionkit bench`` (seed ``--seed``) over ../shared/maps/real when it
 stands beside the repository (else maps/real) and the built-in office and warehouse. Every
@@ -33,6 +34,7 @@ import numpy as np
 
 from fusionkit._atomic import write_text_atomic
 from fusionkit.bench import BenchConfig, find_worlds, make_case, plan_cases
+from fusionkit.errors import InputError
 from fusionkit.methods.consensus import ConsensusConfig, prepare_maps, refine_pso
 from fusionkit.pipeline import MergeConfig, merge
 from fusionkit.transform import Transform2D
@@ -83,6 +85,10 @@ def main() -> None:
     ap.add_argument("--drift-theta", type=float, default=0.0, help="heading drift, rad per sqrt(m)")
     ap.add_argument("--try", dest="trial", default="", metavar="JSON",
                     help='settings of one more variant, e.g. \'{"coarse_points": 400}\'')
+    ap.add_argument("--worlds", nargs="+", default=[], metavar="NAME",
+                    help="only these worlds (map names without .yaml, office, warehouse)")
+    ap.add_argument("--robots", nargs="+", type=int, default=[2, 3, 4, 5],
+                    help="maps per case, in turn (default 2 3 4 5)")
     ap.add_argument("--shipped", action="store_true",
                     help="time only the shipped settings against map-merge")
     ap.add_argument("--record", default="", metavar="FILE",
@@ -100,8 +106,18 @@ def main() -> None:
     shared = root.parent / "shared" / "maps" / "real"
     worlds, _ = find_worlds([shared if shared.is_dir() else root / "maps" / "real"],
                             ("office", "warehouse"))
-    cfg = BenchConfig(methods=("consensus",), cases=args.cases, seed=args.seed,
-                      modes=tuple(args.modes), drift=args.drift, drift_theta=args.drift_theta)
+    if args.worlds:
+        unknown = sorted(set(args.worlds) - {w.name for w in worlds})
+        if unknown:
+            ap.error(f"no world named {', '.join(unknown)}; the worlds are "
+                     f"{', '.join(w.name for w in worlds)}")
+        worlds = [w for w in worlds if w.name in args.worlds]
+    try:
+        cfg = BenchConfig(methods=("consensus",), cases=args.cases, seed=args.seed,
+                          modes=tuple(args.modes), drift=args.drift,
+                          drift_theta=args.drift_theta, robots=tuple(args.robots))
+    except InputError as exc:
+        ap.error(str(exc))
     cv2.setNumThreads(1)
     numba.set_num_threads(1)
     runs = {v: {"right": 0, "wrong": 0, "refused": 0, "t": [], "fb": []} for v in VARIANTS}
