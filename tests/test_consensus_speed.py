@@ -176,3 +176,25 @@ def test_the_nearness_of_kept_placements_is_that_of_their_displacement():
         t = Transform2D(*rng.normal(0, 0.3, 2), rng.normal(0, 0.02))
         for limit in (0.05, 0.2, 0.5):
             assert places.near(t, limit) == any(displacement(t, u, box) < limit for u in kept)
+
+
+@pytest.mark.parametrize("degrees", [12.0, -150.0])
+def test_the_correlation_is_that_of_the_plain_transforms(intel_crop, degrees):
+    from scipy import fft as sfft
+
+    from fusionkit.methods.consensus._search import Correlator, _turned_cells
+
+    a, b = prepare_maps([intel_crop.a, intel_crop.b])
+    corr = Correlator(evidence_raster(a), b.points)
+    theta = math.radians(degrees)
+    got, lo = corr.correlate(theta)
+    cells = _turned_cells(corr.ev, b.points, theta)
+    img = np.zeros((corr.span, corr.span), np.float32)
+    img[np.minimum(cells[:, 1] - lo[1], corr.span - 1),
+        np.minimum(cells[:, 0] - lo[0], corr.span - 1)] = 1
+    fa = sfft.rfft2(corr.ev.values, s=corr.shape, workers=1)
+    fb = sfft.rfft2(img, s=corr.shape, workers=1)
+    # computed as the search does (outside the assertion, whose rewriting would keep the
+    # temporaries alive and so change how numpy multiplies them)
+    want = sfft.irfft2(fa * np.conj(fb), s=corr.shape, workers=1)
+    assert np.array_equal(got, want)

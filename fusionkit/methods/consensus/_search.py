@@ -215,7 +215,8 @@ class Correlator:
         (indices modulo the padded shape)."""
         img, lo = _raster(self.ev, self.points, theta, self.span)
         fb = _rfft2_padded(img, self.shape)
-        return sfft.irfft2(self.fa * np.conj(fb), s=self.shape, workers=1), lo
+        # the product is a temporary: the inverse may work in it
+        return sfft.irfft2(self.fa * np.conj(fb), s=self.shape, workers=1, overwrite_x=True), lo
 
     def best(self, theta: float) -> float:
         """Highest correlation over all translations at rotation ``theta``."""
