@@ -237,7 +237,7 @@ class Correlator:
         rad = max(1, int(round(suppress / ev.cell)))
         out = []
         psi = ev.index.grid.origin[2]
-        work = corr.copy()
+        work = corr                 # a fresh array: its peaks are suppressed in place
         rows, cols = work.shape
         for _ in range(count):
             k = int(np.argmax(work))
