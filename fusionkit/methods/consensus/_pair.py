@@ -146,11 +146,16 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                                         > math.radians(cfg.fallback_step / 2) for q in rots)]
     n_hyp = 0
     usable = cfg.use_scans and (cfg.virtual_scans or not (a.virtual or b.virtual))
+    memo = pair_memo(a, b)
     if usable and len(a.spectra) and len(b.spectra):
-        h = scan_hypotheses(a, b)
-        n_hyp = len(h)
-        centre = b.points.mean(axis=0) if len(b.points) else None
-        clusters = cluster_hypotheses(h, centre=centre, max_clusters=cfg.scan_clusters)
+        # the scans' matches depend on the two maps alone: a pair searched again reuses them
+        key = ("scans", cfg.scan_clusters)
+        if key not in memo:
+            h = scan_hypotheses(a, b)
+            centre = b.points.mean(axis=0) if len(b.points) else None
+            memo[key] = (len(h), cluster_hypotheses(h, centre=centre,
+                                                    max_clusters=cfg.scan_clusters))
+        n_hyp, clusters = memo[key]
         starts += [(c.transform, "scans") for c in clusters]
         for c in clusters[:2]:
             if all(abs(math.remainder(c.transform.theta - r, 2 * math.pi)) > math.radians(2)
@@ -159,7 +164,6 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     wall: list[tuple[float, Transform2D]] = []
     head = set(rots[: 2 * cfg.rotation_peaks + 2])
     corr = Correlator(evidence_a, b.points)
-    memo = pair_memo(a, b)
 
     def translations(theta: float, count: int, suppress: float = 1.0) -> list:
         # the correlation at a rotation depends on nothing else: the fall-back meets the
@@ -253,10 +257,13 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         best = refined[0]
     if cfg.use_scans and len(a.cloud) and len(b.cloud):
         # recorded scans do not quantise walls to cells: pin the best placement down on them
-        tree = tree_a if tree_a is not None else cKDTree(a.cloud)
-        t = refine_cloud(a.cloud, tree, b.cloud, best.transform)
+        key = ("cloud", best.transform.x, best.transform.y, best.transform.theta)
+        if key not in memo:
+            tree = tree_a if tree_a is not None else cKDTree(a.cloud)
+            memo[key] = refine_cloud(a.cloud, tree, b.cloud, best.transform)
+        t = memo[key]
         if displacement(t, best.transform, box) <= cfg.cloud_shift * res:
-            chk = verify(a, b, t)
+            chk = verify_memo(memo, a, b, t)
             if chk.evidence() >= 0.9 * best.rank:
                 best = Candidate(t, chk, best.source)
                 refined[0] = best
