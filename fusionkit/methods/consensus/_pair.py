@@ -189,14 +189,11 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     thin = b.refine_points
     if len(thin) > cfg.coarse_points:
         thin = thin[np.linspace(0, len(thin) - 1, cfg.coarse_points).astype(np.int64)]
-    settled: list[Transform2D] = []
     # the same points for every start: divided by the resolution once
     thin_cells = np.ascontiguousarray(thin / a.resolution, np.float64)
     refine_cells = np.ascontiguousarray(b.refine_points / a.resolution, np.float64)
     thin_name, refine_name = points_key(thin_cells), points_key(refine_cells)
-
     corners_b = box.tolist()
-
     wide_ends = Placements(corners_b)       # where the wide stage of each start ended
     kept = Placements(corners_b)            # the refined candidates' placements
 
@@ -205,7 +202,6 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         if wide_ends.near(t, res):
             return
         wide_ends.add(t)
-        settled.append(t)
         t = refine_memo(memo, a, refine_cells, refine_name, t, DEFAULT_GATES[-2:])
         if kept.near(t, 2 * res):
             return
