@@ -1,8 +1,8 @@
 """Leave-one-world-out over every family of cases, with the peers on the same pairs in the same run.
 
-    python benchmarks/lowo.py [--maps DIR] [--logs DIR] [--seed 1] [--crops 2] [--explore 1]
-                              [--drift-cases 1] [--drift 0.01] [--drift-theta 0.001]
-                              [--repetitive 3] [--splits 2 3 4] [--negatives 1.0]
+    python benchmarks/lowo.py [--maps DIR] [--logs DIR] [--seed 1] [--crops 5] [--explore 2]
+                              [--drift-cases 2] [--drift 0.01] [--drift-theta 0.001]
+                              [--repetitive 6] [--splits 2 3 4] [--negatives 1.0]
                               [--peers map-merge fourier-mellin hough-spectrum spectral-pso]
                               [--peers-on-negatives] [--quick] [--out FILE] [--from FILE]
 
@@ -343,6 +343,22 @@ def tables(data: dict) -> str:
         nres = sum(bool(r.get("resolvable")) for r in rs)
         lines.append(f"| {name} | {len(rs)} ({nres}) | " + " | ".join(cells) + " |")
     lines.append("")
+    # how far off the positives placed outside the bounds are: a near miss or another place
+    for m in ["consensus"] + peers:
+        errs = {}
+        for r in pos:
+            if m == "consensus":
+                if oos(r) == "wrong" and r["consensus"].get("best_error"):
+                    errs.setdefault(r["family"], []).append(r["consensus"]["best_error"])
+            elif m in r and r[m]["outcome"] == "wrong" and r[m].get("error_cells_deg"):
+                errs.setdefault(r["family"], []).append(r[m]["error_cells_deg"])
+        if errs:
+            lines.append(f"- {m}{' (out of sample)' if m == 'consensus' else ''}, placed outside the "
+                         "bounds: " + "; ".join(
+                             f"{f} {len(e)}, median {statistics.median(x[0] for x in e):.1f} cells, "
+                             f"largest {max(x[0] for x in e):.1f} cells and {max(x[1] for x in e):.1f} deg"
+                             for f, e in errs.items()))
+    lines.append("")
     # negatives: each is judged once with each of its two worlds left out
     jud = [(r, w) for r in negs for w in (r["world"], r["other"])]
     passing = [(r, w) for r, w in jud if merged(r, offs[w], eps)]
@@ -433,12 +449,12 @@ def main(argv=None) -> int:
     ap.add_argument("--maps", default=str(HERE.parent / "shared" / "maps" / "real"))
     ap.add_argument("--logs", default=str(HERE.parent / "shared" / "logs" / "real"))
     ap.add_argument("--seed", type=int, default=1, help="seed of the case draw")
-    ap.add_argument("--crops", type=int, default=2, help="crop pairs per real floor")
-    ap.add_argument("--explore", type=int, default=1, help="explorations without drift per real floor")
-    ap.add_argument("--drift-cases", type=int, default=1, help="explorations with drift per real floor")
+    ap.add_argument("--crops", type=int, default=5, help="crop pairs per real floor")
+    ap.add_argument("--explore", type=int, default=2, help="explorations without drift per real floor")
+    ap.add_argument("--drift-cases", type=int, default=2, help="explorations with drift per real floor")
     ap.add_argument("--drift", type=float, default=0.01, help="odometry drift, m per sqrt(m)")
     ap.add_argument("--drift-theta", type=float, default=0.001, help="heading drift, rad per sqrt(m)")
-    ap.add_argument("--repetitive", type=int, default=3,
+    ap.add_argument("--repetitive", type=int, default=6,
                     help="crops and explorations per repetitive world (office, warehouse), each")
     ap.add_argument("--splits", nargs="*", type=int, default=[2, 3, 4], help="K for the logs")
     ap.add_argument("--negatives", type=float, default=1.0, help="negatives per positive, per family")
