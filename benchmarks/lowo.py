@@ -1,0 +1,568 @@
+"""Leave-one-world-out over every family of cases, with the peers on the same pairs in the same run.
+
+    python benchmarks/lowo.py [--maps DIR] [--logs DIR] [--seed 1] [--crops 5] [--explore 2]
+                              [--drift-cases 2] [--drift 0.01] [--drift-theta 0.001]
+                              [--repetitive 6] [--splits 2 3 4] [--negatives 1.0]
+                              [--peers map-merge fourier-mellin hough-spectrum spectral-pso]
+                              [--peers-on-negatives] [--quick] [--out FILE] [--from FILE]
+
+Families of pairs of maps (K = 2), each pair with its truth and its *world* (the building; two
+maps of one building, such as the two RoboCup arena maps, the two Yujin runs or the Intel lab map
+and the Intel log, are one world):
+
+``crop``
+    two overlapping windows of a real floor of ``--maps`` at its native cell size
+    (``fusionkit.bench`` crop cases, 55 % of the floor's shorter side, at least 15 % shared);
+``explore``
+    two simulated robots exploring a real floor, without odometry drift;
+``drift``
+    the same with odometry drift (``--drift`` m and ``--drift-theta`` rad per sqrt(m));
+``repetitive``
+    crops and explorations of the built-in worlds of identical rooms (``office``) and rack rows
+    (``warehouse``);
+``logs``
+    the CARMEN logs of ``--logs`` split into K = 2..4 sessions (``fusionkit import carmen
+    --split K``); every two consecutive sessions are a pair.
+
+*Negatives*: in each family, the first map of a pair against the second map of a pair of another
+world (resampled to the first's cell size when they differ): every placement is wrong. The
+threshold is chosen on them.
+
+The consensus method estimates every pair (:func:`fusionkit.methods.consensus.estimate_pair`,
+default settings) and the inputs of its decision are recorded: ``log10_nfa - calibration`` (the
+model's count of false alarms without the calibrated offset), whether a distinct rival placement
+fits nearly as well (the rival test does not depend on the offset), and whether its best placement
+is right (within 3 cells at the moving map's known-area centroid and 2 degrees). With an offset
+``c`` a pair is merged when ``model + c <= log10(max_false_merge)`` and no rival is found.
+
+Leave-one-world-out: for each world, the offset is chosen on the negatives of all the other worlds
+(the least offset, in quarter decades, at which none of them is merged, plus a quarter decade) and
+that world's positives and negatives are judged with it. In sample: the offset chosen on every
+world. The default offset (``ConsensusConfig.calibration``) is reported too.
+
+A positive is *resolvable* unless some distinct placement fits at least as well as the truth: the
+truth (and the truth polished by ICP on the walls, when that stays within 3 cells) is verified on
+both maps (:func:`fusionkit.methods.consensus.verify`, the robust evidence: agreeing wall cells
+minus misfits, three times per wall on clear free space), against every distinct placement
+(more than ``ConsensusConfig.distinct_cells`` cells away) that the consensus search refined or
+that a peer returned. Crops of identical rooms whose overlap holds no unique feature are the
+pairs this leaves out.
+
+The peers run on the same maps through :func:`fusionkit.pipeline.merge` (``MergeConfig(method=...)``,
+same seed), scored alike; their time is the merge's wall time less its fusion and the common-scale
+confidence. Prints Markdown tables; ``--out`` records every pair (JSON, written after every pair),
+``--from`` redoes the tables from such a record in seconds.
+
+Default sizes: 5 crops, 2 explorations and 2 drifting explorations per real floor, 6 crops and 6
+explorations per repetitive world, the logs at K = 2, 3, 4, one negative per positive: 246
+positives and 246 negatives, 685 s on the project's 2-core machine at a load average of 2-3
+(``benchmarks/records/lowo_seed1.json`` is that run's record). ``--quick``: 4 floors, one pair of
+each kind, K = 2, spectral-pso left out: 40 pairs in about 80 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parents[1]
+FAMILIES = ("crop", "explore", "drift", "repetitive", "logs")
+PEERS = ("map-merge", "fourier-mellin", "hough-spectrum", "spectral-pso")
+GRID = np.arange(0.0, 100.01, 0.25)
+#: map or log name -> building, where two of them show the same place
+SAME_PLACE = {"robocup17_nagoya_gmapping": "robocup17_nagoya", "robocup17_nagoya_srrg": "robocup17_nagoya",
+              "yujin_office_run1": "yujin_office", "yujin_office_run2": "yujin_office",
+              "intel_lab": "intel"}
+
+
+def building(name: str) -> str:
+    """The world (building) a map or log shows."""
+    return SAME_PLACE.get(name, name)
+
+
+# ---------------------------------------------------------------------------------------------
+# Pairs
+# ---------------------------------------------------------------------------------------------
+def _seed(*keys: int) -> int:
+    return int(np.random.SeedSequence([int(k) for k in keys]).generate_state(1)[0] % 2**31)
+
+
+def _rescale(g, resolution: float):
+    """``g`` resampled (nearest neighbour) to cells of ``resolution`` metres, same frame."""
+    from fusionkit.resample import canvas_for, resample
+    from fusionkit.transform import Transform2D
+    if abs(g.resolution - resolution) < 1e-12:
+        return g
+    ident = Transform2D.identity()
+    return resample(g, ident, canvas_for([g], [ident], resolution))
+
+
+def case_pairs(family: str, worlds, per_world: int, seed: int, fam_id: int, *, modes=("crop",),
+               drift=(0.0, 0.0), skipped: list) -> list[dict]:
+    """Pairs from ``fusionkit.bench`` cases: ``per_world`` cases of each world in each mode."""
+    from fusionkit.bench import BenchConfig, CaseSpec, make_case
+    from fusionkit.errors import FusionkitError
+    out = []
+    for mi, mode in enumerate(modes):
+        cfg = BenchConfig(methods=("consensus",), modes=(mode,), robots=(2,), cases=1,
+                          drift=drift[0], drift_theta=drift[1], seed=seed)
+        for wi, w in enumerate(worlds):
+            for n in range(per_world):
+                s = _seed(seed, fam_id, mi, wi, n)
+                try:
+                    case = make_case(CaseSpec(n, w, mode, 2, s), cfg)
+                except FusionkitError as exc:
+                    skipped.append(f"{family} {w.name} case {n}: {exc}")
+                    continue
+                if not case.linked[1]:
+                    skipped.append(f"{family} {w.name} case {n}: the two maps do not overlap enough")
+                    continue
+                out.append({"family": family, "world": building(w.name), "source": w.name,
+                            "mode": mode, "case_seed": s, "a": case.grids[0], "b": case.grids[1],
+                            "scans_a": case.scans[0], "scans_b": case.scans[1],
+                            "truth": case.truth[0].inverse @ case.truth[1]})
+    return out
+
+
+def log_pairs(logs_dir: Path, splits, seed: int, tmp: Path, skipped: list) -> list[dict]:
+    """Every two consecutive sessions of every log split into each K of ``splits``."""
+    from fusionkit.errors import FusionkitError
+    from fusionkit.io_carmen import import_carmen
+    from fusionkit.pipeline import load_inputs
+    from fusionkit.transform import Transform2D
+    out = []
+    for log in sorted(logs_dir.glob("*.log")):
+        name = log.name.split(".")[0]
+        for k in splits:
+            d = tmp / f"{name}{k}"
+            try:
+                import_carmen(log, d, split=k)
+            except FusionkitError as exc:
+                skipped.append(f"logs {name} K={k}: {exc}")
+                continue
+            truth = json.loads((d / "truth.json").read_text())
+            t = [Transform2D(**r["transform"]) for r in truth["robots"]]
+            grids, scans = load_inputs([str(d / f"robot_{i + 1}.yaml") for i in range(k)])
+            for i in range(k - 1):
+                out.append({"family": "logs", "world": building(name), "source": f"{name} K={k} {i + 1}-{i + 2}",
+                            "mode": "log", "case_seed": _seed(seed, 9, k, i), "a": grids[i], "b": grids[i + 1],
+                            "scans_a": scans[i], "scans_b": scans[i + 1], "truth": t[i].inverse @ t[i + 1]})
+    return out
+
+
+def negatives(pos: list[dict], ratio: float, seed: int, fam_id: int) -> list[dict]:
+    """First maps of the family's pairs against second maps of pairs of other worlds."""
+    rng = np.random.default_rng(_seed(seed, 100 + fam_id))
+    out = []
+    count = int(round(ratio * len(pos)))
+    if len({p["world"] for p in pos}) < 2:
+        return out
+    for n in range(count):
+        p = pos[n % len(pos)]
+        others = [q for q in pos if q["world"] != p["world"]]
+        q = others[int(rng.integers(len(others)))]
+        out.append({"family": p["family"], "world": p["world"], "other": q["world"],
+                    "source": f"{p['source']} / {q['source']}", "mode": p["mode"],
+                    "case_seed": _seed(seed, 200 + fam_id, n), "a": p["a"],
+                    "b": _rescale(q["b"], p["a"].resolution), "scans_a": p["scans_a"],
+                    "scans_b": q["scans_b"], "truth": None})
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Running the methods on one pair
+# ---------------------------------------------------------------------------------------------
+def _outcome(t, truth, b) -> str:
+    """``"right"``, ``"wrong"`` or ``"refused"`` (a negative's placement is always wrong)."""
+    if t is None:
+        return "refused"
+    if truth is None:
+        return "wrong"
+    d, r = _error(t, truth, b)
+    return "right" if d <= 3 and r <= 2.0 else "wrong"
+
+
+def _error(t, truth, b) -> tuple[float, float]:
+    """How far (cells) ``t`` puts the moving map's known-area centroid from the truth, and its
+    rotation error (degrees)."""
+    from fusionkit.methods.peers import placement_error
+    d, r = placement_error(t, truth, b)
+    return d / b.resolution, math.degrees(r)
+
+
+def _err(t, truth, b):
+    if t is None or truth is None:
+        return None
+    return [round(v, 2) for v in _error(t, truth, b)]
+
+
+def run_pair(p: dict, peers, with_peers: bool) -> dict:
+    """Estimate one pair with the consensus method (and the peers): a plain record."""
+    from fusionkit.errors import FusionkitError
+    from fusionkit.methods.consensus import ConsensusConfig, estimate_pair, prepare_maps, verify
+    from fusionkit.methods.consensus._pair import corners
+    from fusionkit.methods.consensus._verify import DEFAULT_GATES, displacement, refine_icp
+    from fusionkit.pipeline import MergeConfig, merge
+    cfg = ConsensusConfig()
+    a, b, truth = p["a"], p["b"], p["truth"]
+    seed = p["case_seed"] % 10_000
+    rec = {k: p.get(k) for k in ("family", "world", "other", "source", "mode", "case_seed")}
+    rec.update(kind="pos" if truth is not None else "neg", resolution=a.resolution,
+               shape_a=list(a.data.shape), shape_b=list(b.data.shape))
+    t0 = time.perf_counter()
+    est = estimate_pair(a, b, scans_a=p["scans_a"], scans_b=p["scans_b"], config=cfg, seed=seed)
+    sec = time.perf_counter() - t0
+    pr = est.diagnostics["pair"]
+    lg = pr.diagnostics.get("log10_nfa", math.inf)
+    best = pr.best.transform if pr.best is not None else None
+    rec["consensus"] = {
+        "log10_nfa_model": (lg - cfg.calibration) if math.isfinite(lg) else None,
+        "rivals": int(pr.diagnostics.get("rivals", int(pr.ambiguous))),
+        "ambiguous": bool(pr.ambiguous), "accepted": bool(pr.accepted),
+        "best": _outcome(best, truth, b) if best is not None else "refused",
+        "best_error": _err(best, truth, b),
+        "seconds": round(sec, 4), "reason": pr.reason}
+    placed = {}
+    if with_peers:
+        for m in peers:
+            try:
+                t1 = time.perf_counter()
+                res = merge([a, b], scans=[p["scans_a"], p["scans_b"]],
+                            config=MergeConfig(method=m, seed=seed))
+                s = (time.perf_counter() - t1 - res.seconds.get("confidence", 0.0)
+                     - res.seconds.get("fuse", 0.0))
+                t = res.transforms[1]
+                rec[m] = {"outcome": _outcome(t, truth, b), "error_cells_deg": _err(t, truth, b),
+                          "seconds": round(s, 4)}
+                placed[m] = t
+            except FusionkitError as exc:
+                rec[m] = {"outcome": "refused", "seconds": None, "error": str(exc)}
+    if truth is not None:
+        # resolvable: no distinct placement found by any method fits at least as well as the truth
+        ia, ib = prepare_maps([a, b], [p["scans_a"], p["scans_b"]], config=cfg, seed=seed)
+        box = corners(ib)
+        ev_truth = verify(ia, ib, truth).evidence()
+        polished = refine_icp(ia, ib.refine_points, truth, gates=DEFAULT_GATES[-2:])
+        if displacement(polished, truth, box) <= 3 * a.resolution:
+            ev_truth = max(ev_truth, verify(ia, ib, polished).evidence())
+        distinct = cfg.distinct_cells * a.resolution
+        rival, by = -math.inf, ""
+        for c in pr.refined:
+            if displacement(c.transform, truth, box) > distinct and c.check.evidence() > rival:
+                rival, by = c.check.evidence(), "consensus search"
+        for m, t in placed.items():
+            if t is not None and displacement(t, truth, box) > distinct:
+                e = verify(ia, ib, t).evidence()
+                if e > rival:
+                    rival, by = e, m
+        rec["truth_evidence"] = ev_truth
+        rec["rival_evidence"] = rival if math.isfinite(rival) else None
+        rec["rival_by"] = by
+        rec["resolvable"] = bool(rival < ev_truth)
+    return rec
+
+
+# ---------------------------------------------------------------------------------------------
+# Tables
+# ---------------------------------------------------------------------------------------------
+def merged(rec: dict, offset: float, eps: float, *, rivals: bool = True) -> bool:
+    """Whether the consensus decision merges the pair with ``offset`` (decades); without
+    ``rivals``, the test alone, before the rival test."""
+    c = rec["consensus"]
+    return (c["log10_nfa_model"] is not None and c["log10_nfa_model"] + offset <= math.log10(eps)
+            and not (rivals and c["rivals"]))
+
+
+def choose_offset(negs: list[dict], eps: float, rivals: bool = False) -> float:
+    """The least offset (quarter decades) at which none of ``negs`` passes, plus a quarter:
+    passes the test alone (as ``calibrate_consensus.py`` chooses), or with ``rivals`` the whole
+    decision (the test and the rival test)."""
+    for c in GRID:
+        if not any(merged(r, c, eps, rivals=rivals) for r in negs):
+            return float(c) + 0.25
+    return math.inf
+
+
+def consensus_outcome(rec: dict, offset: float, eps: float) -> str:
+    if not merged(rec, offset, eps):
+        return "refused"
+    return "wrong" if rec["kind"] == "neg" else rec["consensus"]["best"]
+
+
+def lowo(records: list[dict], eps: float, rivals: bool = False) -> dict:
+    """Per world left out, the offset chosen on the negatives of the other worlds; and the offset
+    chosen on every world (in sample)."""
+    worlds = sorted({r["world"] for r in records} | {r["other"] for r in records if r.get("other")})
+    negs = [r for r in records if r["kind"] == "neg"]
+    offsets = {w: choose_offset([r for r in negs if w not in (r["world"], r["other"])], eps, rivals)
+               for w in worlds}
+    return {"offsets": offsets, "in_sample": choose_offset(negs, eps, rivals)}
+
+
+def _count(outcomes) -> tuple[int, int, int]:
+    outcomes = list(outcomes)
+    return (sum(o == "right" for o in outcomes), sum(o == "wrong" for o in outcomes),
+            sum(o == "refused" for o in outcomes))
+
+
+def _cell(outcomes) -> str:
+    r, w, f = _count(outcomes)
+    n = r + w + f
+    return f"{r} / {w} / {f}" + (f" ({100 * r / n:.0f} %)" if n else "")
+
+
+def tables(data: dict) -> str:
+    """The Markdown report of a run (records and settings as recorded)."""
+    records, eps = data["pairs"], data["max_false_merge"]
+    default = data["default_offset"]
+    peers = [m for m in data["peers"] if any(m in r for r in records)]
+    ch = lowo(records, eps)
+    offs, ins = ch["offsets"], ch["in_sample"]
+    pos = [r for r in records if r["kind"] == "pos"]
+    negs = [r for r in records if r["kind"] == "neg"]
+
+    def oos(r):
+        return consensus_outcome(r, offs[r["world"]], eps)
+
+    lines = []
+    head = ["consensus out of sample", "in sample", f"default ({default:g})"] + peers
+    lines.append("Placed right / wrong / refused (share placed right) per family, positives:")
+    lines.append("")
+    lines.append("| family | pairs (resolvable) | " + " | ".join(head) + " |")
+    lines.append("|---|---|" + "---|" * len(head))
+    groups = [(f, [r for r in pos if r["family"] == f]) for f in FAMILIES]
+    groups += [("**all pairs**", pos), ("**resolvable pairs**", [r for r in pos if r.get("resolvable")])]
+    for name, rs in groups:
+        if not rs:
+            continue
+        cells = [_cell(oos(r) for r in rs), _cell(consensus_outcome(r, ins, eps) for r in rs),
+                 _cell(consensus_outcome(r, default, eps) for r in rs)]
+        cells += [_cell(r[m]["outcome"] for r in rs if m in r) for m in peers]
+        nres = sum(bool(r.get("resolvable")) for r in rs)
+        lines.append(f"| {name} | {len(rs)} ({nres}) | " + " | ".join(cells) + " |")
+    lines.append("")
+    # how far off the positives placed outside the bounds are: a near miss or another place
+    for m in ["consensus"] + peers:
+        errs = {}
+        for r in pos:
+            if m == "consensus":
+                if oos(r) == "wrong" and r["consensus"].get("best_error"):
+                    errs.setdefault(r["family"], []).append(r["consensus"]["best_error"])
+            elif m in r and r[m]["outcome"] == "wrong" and r[m].get("error_cells_deg"):
+                errs.setdefault(r["family"], []).append(r[m]["error_cells_deg"])
+        if errs:
+            lines.append(f"- {m}{' (out of sample)' if m == 'consensus' else ''}, placed outside the "
+                         "bounds: " + "; ".join(
+                             f"{f} {len(e)}, median {statistics.median(x[0] for x in e):.1f} cells, "
+                             f"largest {max(x[0] for x in e):.1f} cells and {max(x[1] for x in e):.1f} deg"
+                             for f, e in errs.items()))
+    lines.append("")
+    # negatives: each is judged once with each of its two worlds left out
+    jud = [(r, w) for r in negs for w in (r["world"], r["other"])]
+    passing = [(r, w) for r, w in jud if merged(r, offs[w], eps)]
+    lines.append("Negatives (pairs of two worlds; each judged once with each of its worlds left out):")
+    lines.append("")
+    lines.append("| family | negatives | merged out of sample (of the judgements) | merged in sample | merged at the default |"
+                 + "".join(f" {m} placed |" for m in peers))
+    lines.append("|---|---|---|---|---|" + "---|" * len(peers))
+    for f in FAMILIES + ("**all**",):
+        rs = negs if f == "**all**" else [r for r in negs if r["family"] == f]
+        if not rs:
+            continue
+        j = [(r, w) for r in rs for w in (r["world"], r["other"])]
+        cells = [f"{sum(merged(r, offs[w], eps) for r, w in j)} / {len(j)}",
+                 f"{sum(merged(r, ins, eps) for r in rs)} / {len(rs)}",
+                 f"{sum(merged(r, default, eps) for r in rs)} / {len(rs)}"]
+        cells += [(f"{sum(r[m]['outcome'] == 'wrong' for r in rs if m in r)} / {sum(m in r for r in rs)}"
+                   if any(m in r for r in rs) else "not run") for m in peers]
+        lines.append(f"| {f} | {len(rs)} | " + " | ".join(cells) + " |")
+    if passing:
+        lines.append("")
+        lines.append("Negatives merged out of sample: " + "; ".join(
+            f"{r['source']} ({r['family']}, offset {offs[w]:.2f} chosen without {w})" for r, w in passing))
+    lines.append("")
+    vals = sorted(offs.values())
+    moved = [f"{w} {o:.2f}" for w, o in sorted(offs.items()) if o != ins]
+    lines.append(f"Offset chosen per world left out: {vals[0]:.2f} to {vals[-1]:.2f} decades "
+                 f"(median {statistics.median(vals):.2f}"
+                 + (f"; {', '.join(moved)}, every other world {ins:.2f}" if moved else "")
+                 + f"); in sample {ins:.2f}; default {default:g}. Negatives below the default "
+                 f"threshold refused only by the rival test: "
+                 f"{sum(merged(r, default, eps, rivals=False) and not merged(r, default, eps) for r in negs)}"
+                 f" / {len(negs)}.")
+    lines.append("")
+    # the same, the offset chosen on the whole decision (the rival test included)
+    ch2 = lowo(records, eps, rivals=True)
+    o2, i2 = ch2["offsets"], ch2["in_sample"]
+    lines.append("The offset chosen instead so that no negative passes the whole decision (test and "
+                 f"rival test; in sample {i2:.2f}, per world left out "
+                 f"{min(o2.values()):.2f} to {max(o2.values()):.2f}):")
+    lines.append("")
+    lines.append("| pairs | consensus out of sample | in sample | negatives merged out of sample |")
+    lines.append("|---|---|---|---|")
+    for name, rs in groups[-2:]:
+        lines.append(f"| {name.strip('*')} | {_cell(consensus_outcome(r, o2[r['world']], eps) for r in rs)} | "
+                     f"{_cell(consensus_outcome(r, i2, eps) for r in rs)} | "
+                     + (f"{sum(merged(r, o2[w], eps) for r, w in jud)} / {len(jud)}" if name == "**all pairs**" else "")
+                     + " |")
+    lines.append("")
+    # time per pair, positives, every method on the same pairs
+    lines.append("Time per pair (positives; seconds are only comparable within the run):")
+    lines.append("")
+    lines.append("| method | median s / pair | ratio of the medians to map-merge | median of the per-pair ratios |")
+    lines.append("|---|---|---|---|")
+    methods = ["consensus"] + peers
+    timed = [r for r in pos if all(m in r and r[m].get("seconds") is not None for m in methods)]
+
+    def secs(r, m):
+        return r[m]["seconds"]
+    if timed:
+        ref = "map-merge" if "map-merge" in peers else None
+        for m in methods:
+            med = statistics.median(secs(r, m) for r in timed)
+            if ref:
+                rm = statistics.median(secs(r, ref) for r in timed)
+                pr = statistics.median(secs(r, m) / max(secs(r, ref), 1e-6) for r in timed)
+                lines.append(f"| {m} | {med:.3f} | {med / max(rm, 1e-9):.2f}x | {pr:.2f}x |")
+            else:
+                lines.append(f"| {m} | {med:.3f} | | |")
+        lines.append("")
+        lines.append(f"({len(timed)} positives on which every method ran.)")
+    unres = [r for r in pos if not r.get("resolvable")]
+    if unres:
+        lines.append("")
+        lines.append("Unresolvable positives (a distinct placement fits at least as well as the truth): "
+                     + "; ".join(f"{r['source']} ({r['family']}, by {r['rival_by']})" for r in unres))
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------------------------
+def _write(path: Path, data: dict) -> None:
+    from fusionkit._atomic import write_text_atomic
+    write_text_atomic(path, json.dumps(data, indent=1))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--maps", default=str(HERE.parent / "shared" / "maps" / "real"))
+    ap.add_argument("--logs", default=str(HERE.parent / "shared" / "logs" / "real"))
+    ap.add_argument("--seed", type=int, default=1, help="seed of the case draw")
+    ap.add_argument("--crops", type=int, default=5, help="crop pairs per real floor")
+    ap.add_argument("--explore", type=int, default=2, help="explorations without drift per real floor")
+    ap.add_argument("--drift-cases", type=int, default=2, help="explorations with drift per real floor")
+    ap.add_argument("--drift", type=float, default=0.01, help="odometry drift, m per sqrt(m)")
+    ap.add_argument("--drift-theta", type=float, default=0.001, help="heading drift, rad per sqrt(m)")
+    ap.add_argument("--repetitive", type=int, default=6,
+                    help="crops and explorations per repetitive world (office, warehouse), each")
+    ap.add_argument("--splits", nargs="*", type=int, default=[2, 3, 4], help="K for the logs")
+    ap.add_argument("--negatives", type=float, default=1.0, help="negatives per positive, per family")
+    ap.add_argument("--peers", nargs="*", default=list(PEERS))
+    ap.add_argument("--peers-on-negatives", action="store_true", help="run the peers on the negatives too")
+    ap.add_argument("--families", nargs="+", default=list(FAMILIES), choices=FAMILIES)
+    ap.add_argument("--max-false-merge", type=float, default=None,
+                    help="risk the decision is judged at (default: ConsensusConfig's)")
+    ap.add_argument("--quick", action="store_true",
+                    help="a smoke run: 4 floors, one pair each, K = 2 logs, no spectral-pso")
+    ap.add_argument("--out", default=None, help="record every pair (JSON) here")
+    ap.add_argument("--from", dest="source", default=None, help="redo the tables from a record")
+    args = ap.parse_args(argv)
+    if args.source:
+        try:
+            data = json.loads(Path(args.source).read_text())
+            print(tables(data))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"lowo: {args.source}: not a record written by --out ({exc}); give one", file=sys.stderr)
+            return 2
+        return 0
+
+    from fusionkit.bench import find_worlds
+    from fusionkit.errors import FusionkitError
+    from fusionkit.methods import METHODS
+    from fusionkit.methods.consensus import ConsensusConfig
+    cfg = ConsensusConfig()
+    eps = args.max_false_merge if args.max_false_merge is not None else cfg.max_false_merge
+    bad = [m for m in args.peers if m not in METHODS or m == "consensus"]
+    if bad:
+        print(f"lowo: unknown peer {bad[0]!r}; choose from {', '.join(m for m in METHODS if m != 'consensus')}",
+              file=sys.stderr)
+        return 2
+    if min(args.crops, args.explore, args.drift_cases, args.repetitive) < 0 or args.negatives < 0:
+        print("lowo: case counts and --negatives must be >= 0", file=sys.stderr)
+        return 2
+    if not 0 < eps < 1:
+        print(f"lowo: --max-false-merge is a risk in (0, 1), got {eps}", file=sys.stderr)
+        return 2
+    if any(k < 2 for k in args.splits):
+        print("lowo: --splits are numbers of sessions, each >= 2", file=sys.stderr)
+        return 2
+    if args.quick:
+        args.crops, args.explore, args.drift_cases, args.repetitive = 1, 1, 1, 1
+        args.splits = [2]
+        args.peers = [m for m in args.peers if m != "spectral-pso"]
+    try:
+        real, skipped_worlds = find_worlds([args.maps])
+        builtin, _ = find_worlds([], ["office", "warehouse"])
+    except FusionkitError as exc:
+        print(f"lowo: {exc}", file=sys.stderr)
+        return 2
+    logs_dir = Path(args.logs)
+    if "logs" in args.families and not logs_dir.is_dir():
+        print(f"lowo: {logs_dir}: no such folder of CARMEN logs; give --logs or leave out the logs family",
+              file=sys.stderr)
+        return 2
+    if args.quick:
+        real = real[:: max(1, len(real) // 4)][:4]
+    skipped = [f"world {n}: {why}" for n, why in skipped_worlds]
+    settings = {k: v for k, v in vars(args).items() if k not in ("source",)}
+    data = {"settings": settings, "command": " ".join(["python", "benchmarks/lowo.py"] + list(argv or sys.argv[1:])),
+            "max_false_merge": eps, "default_offset": cfg.calibration, "peers": list(args.peers),
+            "pairs": [], "skipped": skipped}
+    out = Path(args.out) if args.out else None
+    t_start = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for fid, fam in enumerate(FAMILIES):
+            if fam not in args.families:
+                continue
+            if fam == "crop":
+                pos = case_pairs(fam, real, args.crops, args.seed, fid, modes=("crop",), skipped=skipped)
+            elif fam == "explore":
+                pos = case_pairs(fam, real, args.explore, args.seed, fid, modes=("explore",), skipped=skipped)
+            elif fam == "drift":
+                pos = case_pairs(fam, real, args.drift_cases, args.seed, fid, modes=("explore",),
+                                 drift=(args.drift, args.drift_theta), skipped=skipped)
+            elif fam == "repetitive":
+                pos = case_pairs(fam, builtin, args.repetitive, args.seed, fid, modes=("crop", "explore"),
+                                 skipped=skipped)
+            else:
+                pos = log_pairs(logs_dir, args.splits, args.seed, Path(tmp), skipped)
+            neg = negatives(pos, args.negatives, args.seed, fid)
+            for p in pos + neg:
+                rec = run_pair(p, args.peers, with_peers=p["truth"] is not None or args.peers_on_negatives)
+                data["pairs"].append(rec)
+                c = rec["consensus"]
+                print(f"{fam:10} {rec['kind']} {rec['source'][:48]:48} model {c['log10_nfa_model'] if c['log10_nfa_model'] is None else round(c['log10_nfa_model'], 2)!s:>7} "
+                      f"best {c['best']:7} " + " ".join(f"{m}={rec[m]['outcome'][0]}" for m in args.peers if m in rec)
+                      + ("" if rec["kind"] == "neg" else f" resolvable={rec['resolvable']}"),
+                      file=sys.stderr, flush=True)
+                if out:
+                    _write(out, data)
+    data["seconds"] = round(time.perf_counter() - t_start, 1)
+    if out:
+        _write(out, data)
+    print(tables(data))
+    print()
+    print(f"{len(data['pairs'])} pairs in {data['seconds']:.0f} s; skipped: {len(skipped)}"
+          + "".join(f"\n  {s}" for s in skipped))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

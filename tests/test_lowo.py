@@ -1,0 +1,95 @@
+"""The leave-one-world-out tables of ``benchmarks/lowo.py``, redone from a small record."""
+
+import importlib.util
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "lowo.py"
+
+
+@pytest.fixture(scope="module")
+def lowo():
+    spec = importlib.util.spec_from_file_location("lowo_script", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def pos(world, model, best="right", rivals=0, family="crop", resolvable=True, mm="right"):
+    return {"family": family, "world": world, "other": None, "source": world, "kind": "pos",
+            "consensus": {"log10_nfa_model": model, "rivals": rivals, "best": best, "seconds": 0.2},
+            "map-merge": {"outcome": mm, "seconds": 0.1}, "resolvable": resolvable,
+            "rival_by": "" if resolvable else "consensus search"}
+
+
+def neg(world, other, model, rivals=0, family="crop"):
+    return {"family": family, "world": world, "other": other, "source": f"{world} / {other}",
+            "kind": "neg", "consensus": {"log10_nfa_model": model, "rivals": rivals, "best": "wrong",
+                                         "seconds": 0.2}}
+
+
+@pytest.fixture
+def record():
+    # log10(0.01) = -2: a negative with model m passes the test at offsets below -2 - m
+    pairs = [pos("A", -20.0), pos("B", -9.0), pos("C", -3.0), pos("C", -30.0, best="wrong",
+                                                                     resolvable=False, mm="refused"),
+             neg("A", "B", -5.0), neg("B", "C", -8.0), neg("A", "C", -50.0, rivals=1)]
+    return {"max_false_merge": 0.01, "default_offset": 7.5, "peers": ["map-merge"], "pairs": pairs}
+
+
+def test_offset_is_chosen_without_the_world_left_out(lowo, record):
+    ch = lowo.lowo(record["pairs"], 0.01)
+    # without A only B-C (-8) is left: it passes up to 6, none passes from 6.25, plus a quarter;
+    # without C only A-B (-5); without B only A-C (-50), whose rival does not excuse it: the
+    # choice is made on the test alone
+    assert ch["offsets"] == {"A": 6.5, "B": 48.5, "C": 3.5}
+    assert ch["in_sample"] == 48.5
+    # with the rival test counted, A-C no longer passes and B-C sets the offset
+    assert lowo.lowo(record["pairs"], 0.01, rivals=True)["in_sample"] == 6.5
+
+
+def test_world_left_out_is_judged_with_its_own_offset(lowo, record):
+    ch = lowo.lowo(record["pairs"], 0.01)
+    out = {(r["world"], r["consensus"]["log10_nfa_model"]):
+           lowo.consensus_outcome(r, ch["offsets"][r["world"]], 0.01)
+           for r in record["pairs"] if r["kind"] == "pos"}
+    # A with 6.5: -13.5 <= -2, merged; B with 48.5 and C (-3) with 3.5: refused; the other C
+    # pair is merged at the wrong place
+    assert out == {("A", -20.0): "right", ("B", -9.0): "refused", ("C", -3.0): "refused",
+                   ("C", -30.0): "wrong"}
+
+
+def test_tables_redone_from_a_record(lowo, record, tmp_path, capsys):
+    path = tmp_path / "rec.json"
+    path.write_text(json.dumps(record))
+    assert lowo.main(["--from", str(path)]) == 0
+    text = capsys.readouterr().out
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    # out of sample, in sample (48.5 refuses all), default 7.5, map-merge
+    assert rows["**all pairs**"].split("|")[3:7] == [" 1 / 1 / 2 (25 %) ", " 0 / 0 / 4 (0 %) ",
+                                                     " 1 / 1 / 2 (25 %) ", " 3 / 0 / 1 (75 %) "]
+    assert rows["**resolvable pairs**"].split("|")[2].strip() == "3 (3)"
+    assert rows["**resolvable pairs**"].split("|")[3].strip() == "1 / 0 / 2 (33 %)"
+    # B-C judged with B left out (48.5: refused) and with C left out (3.5: -4.5, merged); A-B
+    # with neither; A-C never (a rival)
+    assert rows["**all**"].split("|")[3].strip() == "1 / 6"
+
+
+def test_a_record_it_cannot_read_is_one_line_and_exit_2(lowo, tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    assert lowo.main(["--from", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a record" in err[0]
+
+
+def test_no_offset_clears_a_negative_at_every_decade_refuses_everything(lowo):
+    pairs = [pos("A", -500.0), neg("A", "B", -400.0), neg("B", "C", -400.0)]
+    ch = lowo.lowo(pairs, 0.01)
+    assert math.isinf(ch["offsets"]["A"]) and math.isinf(ch["in_sample"])
+    assert lowo.consensus_outcome(pairs[0], ch["offsets"]["A"], 0.01) == "refused"
+    assert "in sample inf" in lowo.tables({"max_false_merge": 0.01, "default_offset": 7.5,
+                                          "peers": [], "pairs": pairs})
