@@ -242,11 +242,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     eps = cfg.max_false_merge
 
     def settled(model: NullModel, drawn: list) -> bool:
-        # the decision no longer depends on more samples when it holds with the design effect
-        # half or twice what the samples so far show (its estimate is the roughest part of the
-        # model): far short of the threshold even at half, refused whatever more samples show;
-        # far beyond it even at twice, with no wrong placement drawn near the best one, accepted
-        # unless a rival is found (the search and the alias search look for them too)
+        # the decision no longer depends on more samples when it holds with walls twice or
+        # half as correlated as the model assumes (a margin for the rough share ``p0`` of the
+        # samples so far): far short of the threshold even at half, refused whatever more
+        # samples show; far beyond it even at twice, with no wrong placement drawn near the
+        # best one, accepted unless a rival is found (the search and the alias search look for
+        # them too)
         th = math.log10(eps)
         if replace(model, design=model.design / 2).log10_nfa(best.check) >= th + cfg.null_margin:
             return True
