@@ -195,3 +195,17 @@ def test_a_merged_map_reports_how_far_its_walls_stay_from_the_others(intel_crop)
     assert result.placements[1].residual is not None
     assert 0.0 <= result.placements[1].residual <= intel_crop.a.resolution
     assert "residual" in result.report()["maps"][1]
+
+
+@pytest.mark.parametrize("seed", [6, 26])
+def test_two_buildings_whose_walls_happen_to_fit_are_not_merged(seed):
+    """A window of the MIT basement and one of the Osnabrueck floor fit each other over 30-45 m
+    of wall with few misfits (offices and corridors of standard sizes): every placement is
+    wrong, and the test must say it cannot be sure."""
+    rng = np.random.default_rng(seed)
+    a = crop_pair(load_map(REAL / "mit_stata_basement.yaml"), rng, size=240, min_overlap=0.4).a
+    b = crop_pair(load_map(REAL / "uos_avz_floor5.yaml"), rng, size=240, min_overlap=0.4).b
+    est = estimate_pair(a, b)
+    pr = est.diagnostics["pair"]
+    assert pr.best.check.agreeing * a.resolution > 30.0
+    assert not est.accepted and est.diagnostics["pair"].reason
