@@ -53,10 +53,12 @@ class NullModel:
     placement with probability at most ``exp(-(n / design) KL(f || p0))`` (Chernoff), and its
     number of false alarms is that times ``tests``, the number of distinct placements a search
     can end on (:func:`search_tests`): the expected count of wrong placements that would fit
-    as well, which the user bounds by ``max_false_merge``. Neither depends on the cell size,
+    as well, which the user bounds by ``max_false_merge``. A placement whose robust evidence
+    (:meth:`Check.evidence`) is not positive, the maps contradicting each other more than they
+    agree, is given no evidence at all. Neither depends on the cell size,
     the extent or the clutter of the maps; all three enter through the maps' own wrong
-    placements. ``calibration`` (decades) is added to that count's logarithm: measured on
-    pairs of different buildings, the model's tail is lighter than the truth's (BENCHMARKS.md).
+    placements. ``calibration`` (decades) is added to that count's logarithm: a margin chosen
+    on pairs of maps of different buildings (BENCHMARKS.md).
     """
 
     fractions: np.ndarray
@@ -77,7 +79,10 @@ class NullModel:
             return math.inf
         k, n = _trials(chk)
         top = math.log10(self.tests) + self.calibration
-        if n <= 0:
+        if n <= 0 or chk.evidence() <= 0:
+            # a placement under which the maps contradict each other more than they agree
+            # (its walls miss the other's or cross its open floor more often than they meet)
+            # is no evidence of being the same place, however rarely wrong placements do as well
             return top
         f = k / n
         if f <= self.p0:

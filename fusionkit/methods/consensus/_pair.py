@@ -299,6 +299,11 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         reason = (f"ambiguous: {len(rivals) + 1} distinct placements fit about as well "
                   f"({100 * min(r.check.score for r in rivals):.0f}-{100 * best.check.score:.0f}% "
                   "of the walls meet) and the maps alone cannot tell them apart")
+    elif best.rank <= 0:
+        chk = best.check
+        reason = (f"best placement is contradicted: {100 * chk.score:.0f}% of the walls meet, but "
+                  f"{chk.disagreeing} wall cells miss the other map's walls and {chk.conflicts} of "
+                  f"them cross its open floor, more than the {chk.agreeing} that meet")
     elif not null.usable:
         reason = ("nothing to judge a placement by: too few walls overlap at any placement to tell "
                   "a right one from a wrong one")
