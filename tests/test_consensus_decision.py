@@ -209,3 +209,19 @@ def test_two_buildings_whose_walls_happen_to_fit_are_not_merged(seed):
     pr = est.diagnostics["pair"]
     assert pr.best.check.agreeing * a.resolution > 30.0
     assert not est.accepted and est.diagnostics["pair"].reason
+
+
+
+def test_a_placement_that_contradicts_more_wall_than_it_explains_carries_no_evidence(intel_crop):
+    """Two explorations of different buildings can line up 2000 wall cells where wrong
+    placements line up a few percent, while 780 other wall cells miss and 689 cross the other
+    map's open floor: rare among wrong placements, but the maps contradict each other more than
+    they agree, so the test gives it no evidence (at least one false alarm expected); the same
+    agreement without the contradictions is decisive."""
+    from fusionkit.methods.consensus._verify import Check
+    null = estimate_pair(intel_crop.a, intel_crop.b).diagnostics["pair"].null
+    contradicted = Check(0.70, 0.70, 0.74, 1309, 2003, 780, 689, 0.25)
+    assert contradicted.evidence() <= 0
+    assert null.nfa(contradicted) >= 1.0
+    clean = Check(1.0, 1.0, 1.0, 1309, 2003, 0, 0, 0.0)
+    assert null.nfa(clean) <= ConsensusConfig().max_false_merge
