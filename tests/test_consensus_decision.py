@@ -195,3 +195,33 @@ def test_a_merged_map_reports_how_far_its_walls_stay_from_the_others(intel_crop)
     assert result.placements[1].residual is not None
     assert 0.0 <= result.placements[1].residual <= intel_crop.a.resolution
     assert "residual" in result.report()["maps"][1]
+
+
+@pytest.mark.parametrize("seed", [6, 26])
+def test_two_buildings_whose_walls_happen_to_fit_are_not_merged(seed):
+    """A window of the MIT basement and one of the Osnabrueck floor fit each other over 30-45 m
+    of wall with few misfits (offices and corridors of standard sizes): every placement is
+    wrong, and the test must say it cannot be sure."""
+    rng = np.random.default_rng(seed)
+    a = crop_pair(load_map(REAL / "mit_stata_basement.yaml"), rng, size=240, min_overlap=0.4).a
+    b = crop_pair(load_map(REAL / "uos_avz_floor5.yaml"), rng, size=240, min_overlap=0.4).b
+    est = estimate_pair(a, b)
+    pr = est.diagnostics["pair"]
+    assert pr.best.check.agreeing * a.resolution > 30.0
+    assert not est.accepted and est.diagnostics["pair"].reason
+
+
+
+def test_a_placement_that_contradicts_more_wall_than_it_explains_carries_no_evidence(intel_crop):
+    """Two explorations of different buildings can line up 2000 wall cells where wrong
+    placements line up a few percent, while 780 other wall cells miss and 689 cross the other
+    map's open floor: rare among wrong placements, but the maps contradict each other more than
+    they agree, so the test gives it no evidence (at least one false alarm expected); the same
+    agreement without the contradictions is decisive."""
+    from fusionkit.methods.consensus._verify import Check
+    null = estimate_pair(intel_crop.a, intel_crop.b).diagnostics["pair"].null
+    contradicted = Check(0.70, 0.70, 0.74, 1309, 2003, 780, 689, 0.25)
+    assert contradicted.evidence() <= 0
+    assert null.nfa(contradicted) >= 1.0
+    clean = Check(1.0, 1.0, 1.0, 1309, 2003, 0, 0, 0.0)
+    assert null.nfa(clean) <= ConsensusConfig().max_false_merge

@@ -34,12 +34,15 @@ class ConsensusConfig:
         points end the wrong placements a little lower (on the leave-one-world-out pairs, one
         pair of two buildings gained 0.3 decades with 300), which shifts the calibration.
     calibration : float
-        Decades added to the model's count of false alarms (:class:`NullModel`): on pairs of
-        crops of two different buildings the model is optimistic; this is chosen there, by
-        leave-one-world-out (BENCHMARKS.md).
+        Decades added to the model's count of false alarms (:class:`NullModel`), a safety
+        margin chosen on pairs of maps of two different buildings, where every placement is
+        wrong: the least offset at which none of them is merged, plus one decade for the spread
+        from one set of maps to another (BENCHMARKS.md, leave-one-world-out).
     wall_correlation : float
-        Length of wall (m) along which cells agree or not together: the prior of the null
-        model's design effect, which the measured one is shrunk towards (:func:`null_model`).
+        Length of wall (m) along which cells agree or not together: one independent trial of
+        the test (:class:`NullModel`), so that it weighs metres of wall, not cells. Chosen with
+        ``calibration`` by leave-one-world-out (BENCHMARKS.md): at 6 m the model needs about
+        no correction on pairs of different buildings.
     cloud_shift : float
         Largest move (cells) the refinement on recorded scans may make to a placement.
     rival : float
@@ -99,8 +102,8 @@ class ConsensusConfig:
     null_margin : float
         Decades: the null distribution is drawn in batches (32 wrong placements first, then 16
         at a time), and stops being drawn once the placement under test stays this far short
-        of the threshold with half the design effect measured so far, or this far beyond it
-        with twice that design effect and no wrong placement drawn coming near it
+        of the threshold with half the design effect (cells counted as one trial), or this
+        far beyond it with twice that and no wrong placement drawn coming near it
         (``null_samples`` at most; ``inf`` draws them all).
     loop_cells : float
         Largest disagreement (cells, at the moving map's corners) of a loop of three
@@ -123,8 +126,8 @@ class ConsensusConfig:
     max_false_merge: float = 0.01
     null_samples: int = 64
     null_wide_points: int = 0
-    calibration: float = 7.5
-    wall_correlation: float = 3.0
+    calibration: float = 1.0
+    wall_correlation: float = 6.0
     cloud_shift: float = 4.0
     rival: float = 0.6
     distinct_cells: float = 6.0

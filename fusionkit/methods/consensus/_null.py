@@ -45,18 +45,21 @@ class NullModel:
     ``fractions`` holds the share of compared wall cells that meet the other map's walls (a
     cell on clear free space counting as three misses) and ``trials`` the cells compared.
     ``p0`` is their pooled share: the chance that a wall cell meets a wall at a wrong placement.
-    Wall cells come in lines, so neighbouring cells agree or not together; ``design`` is the
-    factor by which the shares vary more than independent cells would (their variance over the
-    binomial one), and a placement's cells count as ``trials / design`` independent ones.
+    Wall cells come in lines, so neighbouring cells agree or not together: ``design`` is the
+    number of cells along ``correlation`` metres of wall (the cells of one map that move as one
+    piece of wall), and a placement's cells count as ``trials / design`` independent ones, so
+    that the test weighs metres of wall, not cells, and means the same at any cell size.
 
     A placement whose share ``f > p0`` of ``n`` compared cells is then reached by one wrong
     placement with probability at most ``exp(-(n / design) KL(f || p0))`` (Chernoff), and its
     number of false alarms is that times ``tests``, the number of distinct placements a search
     can end on (:func:`search_tests`): the expected count of wrong placements that would fit
-    as well, which the user bounds by ``max_false_merge``. Neither depends on the cell size,
+    as well, which the user bounds by ``max_false_merge``. A placement whose robust evidence
+    (:meth:`Check.evidence`) is not positive, the maps contradicting each other more than they
+    agree, is given no evidence at all. Neither depends on the cell size,
     the extent or the clutter of the maps; all three enter through the maps' own wrong
-    placements. ``calibration`` (decades) is added to that count's logarithm: measured on
-    pairs of different buildings, the model's tail is lighter than the truth's (BENCHMARKS.md).
+    placements. ``calibration`` (decades) is added to that count's logarithm: a margin chosen
+    on pairs of maps of different buildings (BENCHMARKS.md).
     """
 
     fractions: np.ndarray
@@ -77,7 +80,10 @@ class NullModel:
             return math.inf
         k, n = _trials(chk)
         top = math.log10(self.tests) + self.calibration
-        if n <= 0:
+        if n <= 0 or chk.evidence() <= 0:
+            # a placement under which the maps contradict each other more than they agree
+            # (its walls miss the other's or cross its open floor more often than they meet)
+            # is no evidence of being the same place, however rarely wrong placements do as well
             return top
         f = k / n
         if f <= self.p0:
@@ -148,8 +154,8 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     calibration : float
         See :class:`NullModel`.
     correlation : float
-        Length of wall (m) whose cells agree or not together, the prior the measured design
-        effect is shrunk towards.
+        Length of wall (m) whose cells agree or not together: one independent trial of the
+        test (see :class:`NullModel`).
     settled : callable(NullModel, list) -> bool, optional
         Sequential sampling: after every ``batch`` wrong placements, the model of those drawn
         so far and the placements themselves are passed to ``settled``; when it answers that
@@ -220,14 +226,12 @@ def _fit(out: list, resolution: float, tests: float, calibration: float,
     if len(kn):
         f = kn[:, 0] / kn[:, 1]
         p0 = float(kn[:, 0].sum() / kn[:, 1].sum())
-        binom = max(p0 * (1 - p0), 1e-9) / kn[:, 1]
-        # the median ratio (over that of a chi-square with one degree of freedom, 0.455): a few
-        # wrong placements on repeated structure must not hide how alike the others are
-        measured = max(float(np.median((f - p0) ** 2 / binom)) / 0.455, 1.0)
-        # 32 to 64 wrong placements measure it only roughly (from a few tens to a few hundred
-        # cells on one map): shrink it towards the cells of ``correlation`` metres of wall
-        # (geometric mean)
-        design = math.sqrt(measured * max(correlation / resolution, 1.0))
+        # the design effect is not measured from the wrong placements: their spread mixes the
+        # correlation of neighbouring cells with how often a wrong placement happens to line
+        # up a whole wall, and 32 to 64 of them measure it only roughly; a fixed length of wall
+        # per independent trial ranks placements of unseen maps better (leave-one-world-out,
+        # BENCHMARKS.md) and leaves the calibration far steadier from one set of maps to another
+        design = max(correlation / resolution, 1.0)
     else:
         f, p0, design = np.zeros(0), 1.0, 1.0
     return NullModel(f, kn[:, 1], p0, design, tests, calibration)

@@ -270,11 +270,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     eps = cfg.max_false_merge
 
     def settled(model: NullModel, drawn: list) -> bool:
-        # the decision no longer depends on more samples when it holds with the design effect
-        # half or twice what the samples so far show (its estimate is the roughest part of the
-        # model): far short of the threshold even at half, refused whatever more samples show;
-        # far beyond it even at twice, with no wrong placement drawn near the best one, accepted
-        # unless a rival is found (the search and the alias search look for them too)
+        # the decision no longer depends on more samples when it holds with walls twice or
+        # half as correlated as the model assumes (a margin for the rough share ``p0`` of the
+        # samples so far): far short of the threshold even at half, refused whatever more
+        # samples show; far beyond it even at twice, with no wrong placement drawn near the
+        # best one, accepted unless a rival is found (the search and the alias search look for
+        # them too)
         th = math.log10(eps)
         if replace(model, design=model.design / 2).log10_nfa(best.check) >= th + cfg.null_margin:
             return True
@@ -326,6 +327,11 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         reason = (f"ambiguous: {len(rivals) + 1} distinct placements fit about as well "
                   f"({100 * min(r.check.score for r in rivals):.0f}-{100 * best.check.score:.0f}% "
                   "of the walls meet) and the maps alone cannot tell them apart")
+    elif best.rank <= 0:
+        chk = best.check
+        reason = (f"best placement is contradicted: {100 * chk.score:.0f}% of the walls meet, but "
+                  f"{chk.disagreeing} wall cells miss the other map's walls and {chk.conflicts} of "
+                  f"them cross its open floor, more than the {chk.agreeing} that meet")
     elif not null.usable:
         reason = ("nothing to judge a placement by: too few walls overlap at any placement to tell "
                   "a right one from a wrong one")
