@@ -16,8 +16,9 @@ from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
 from ._null import NullModel, null_model
-from ._verify import (DEFAULT_GATES, Check, Placements, displacement, pair_memo, points_key,
-                      refine_cloud, refine_icp, refine_memo, refine_pso, verify, verify_memo)
+from ._verify import (DEFAULT_GATES, Check, Placements, _in_cells, displacement, pair_memo,
+                      points_key, refine_cloud, refine_icp, refine_memo, refine_pso, verify,
+                      verify_memo)
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
 
@@ -191,7 +192,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         thin = thin[np.linspace(0, len(thin) - 1, cfg.coarse_points).astype(np.int64)]
     # the same points for every start: divided by the resolution once
     thin_cells = np.ascontiguousarray(thin / a.resolution, np.float64)
-    refine_cells = np.ascontiguousarray(b.refine_points / a.resolution, np.float64)
+    refine_cells = _in_cells(b, b.refine_points, a.resolution)
     thin_name, refine_name = points_key(thin_cells), points_key(refine_cells)
     corners_b = box.tolist()
     wide_ends = Placements(corners_b)       # where the wide stage of each start ended
