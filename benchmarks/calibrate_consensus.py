@@ -14,8 +14,8 @@ recorded.
 
 The constant is ``ConsensusConfig.calibration``: decades added to the null model's count of
 false alarms. For each world in turn it is chosen on the pairs of all the other worlds (the
-least offset, in quarter decades, at which none of their negatives would be merged, plus
-``--margin`` decades, 1 by default, as the shipped constant was chosen) and measured on the
+least offset, in quarter decades and possibly below zero, at which none of their negatives
+would be merged, plus ``--margin`` decades, 1 by default, as the shipped constant was chosen) and measured on the
 pairs of the world left out: positives placed right (passing the test, not ambiguous, at the
 truth), positives placed wrong, negatives merged. Whether a pair is ambiguous is read from the
 run at the default offset, as the rival test is not run again at each offset. Two maps of one
@@ -88,10 +88,11 @@ def merged(row: dict, offset: float) -> bool:
 
 
 def least_offset(rows: list[dict], margin: float) -> float:
-    """The least offset (quarter decades) at which none of the negatives ``rows`` is merged,
-    plus ``margin``."""
-    worst = min((r["log10_nfa_model"] for r in rows if not r["ambiguous"]), default=-math.inf)
-    return max(math.ceil((math.log10(EPS) - worst) * 4 + 1e-9) / 4, 0.0) + margin
+    """The least offset (quarter decades, from -20: below 0 the model counts more false alarms
+    than occur) at which none of the negatives ``rows`` is merged, plus ``margin``."""
+    worst = min((r["log10_nfa_model"] for r in rows if not r["ambiguous"]), default=math.inf)
+    least = math.ceil((math.log10(EPS) - worst) * 4 + 1e-9) / 4 if math.isfinite(worst) else -20.0
+    return max(least, -20.0) + margin
 
 
 def leave_one_world_out(rows: list[dict], margin: float = 1.0) -> None:

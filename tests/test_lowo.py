@@ -42,13 +42,17 @@ def record():
 
 def test_offset_is_chosen_without_the_world_left_out(lowo, record):
     ch = lowo.lowo(record["pairs"], 0.01)
-    # without A only B-C (-8) is left: it passes up to 6, none passes from 6.25, plus a quarter;
-    # without C only A-B (-5); without B only A-C (-50), whose rival does not excuse it: the
-    # choice is made on the test alone
-    assert ch["offsets"] == {"A": 6.5, "B": 48.5, "C": 3.5}
-    assert ch["in_sample"] == 48.5
-    # with the rival test counted, A-C no longer passes and B-C sets the offset
-    assert lowo.lowo(record["pairs"], 0.01, rivals=True)["in_sample"] == 6.5
+    # the whole decision, as the shipped constant is chosen: without A only B-C (-8) is left:
+    # it passes up to 6, none passes from 6.25, plus a decade; without C only A-B (-5); without
+    # B only A-C, which its rival refuses at any offset: the least offset tried, plus a decade
+    assert ch["offsets"] == {"A": 7.25, "B": -19.0, "C": 4.25}
+    assert ch["in_sample"] == 7.25
+    # on the test alone, A-C (-50) passes up to 48 and sets the offset wherever it is counted
+    alone = lowo.lowo(record["pairs"], 0.01, rivals=False)
+    assert alone["offsets"] == {"A": 7.25, "B": 49.25, "C": 4.25}
+    assert alone["in_sample"] == 49.25
+    # the margin is the one given
+    assert lowo.lowo(record["pairs"], 0.01, margin=0.25)["in_sample"] == 6.5
 
 
 def test_world_left_out_is_judged_with_its_own_offset(lowo, record):
@@ -56,9 +60,9 @@ def test_world_left_out_is_judged_with_its_own_offset(lowo, record):
     out = {(r["world"], r["consensus"]["log10_nfa_model"]):
            lowo.consensus_outcome(r, ch["offsets"][r["world"]], 0.01)
            for r in record["pairs"] if r["kind"] == "pos"}
-    # A with 6.5: -13.5 <= -2, merged; B with 48.5 and C (-3) with 3.5: refused; the other C
-    # pair is merged at the wrong place
-    assert out == {("A", -20.0): "right", ("B", -9.0): "refused", ("C", -3.0): "refused",
+    # A with 7.25: -12.75 <= -2, merged; B with -19: merged; C (-3) with 4.25: refused; the
+    # other C pair is merged at the wrong place
+    assert out == {("A", -20.0): "right", ("B", -9.0): "right", ("C", -3.0): "refused",
                    ("C", -30.0): "wrong"}
 
 
@@ -68,14 +72,16 @@ def test_tables_redone_from_a_record(lowo, record, tmp_path, capsys):
     assert lowo.main(["--from", str(path)]) == 0
     text = capsys.readouterr().out
     rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
-    # out of sample, in sample (48.5 refuses all), default 7.5, map-merge
-    assert rows["**all pairs**"].split("|")[3:7] == [" 1 / 1 / 2 (25 %) ", " 0 / 0 / 4 (0 %) ",
+    # out of sample, in sample (7.25), default 7.5, map-merge
+    assert rows["**all pairs**"].split("|")[3:7] == [" 2 / 1 / 1 (50 %) ", " 1 / 1 / 2 (25 %) ",
                                                      " 1 / 1 / 2 (25 %) ", " 3 / 0 / 1 (75 %) "]
     assert rows["**resolvable pairs**"].split("|")[2].strip() == "3 (3)"
-    assert rows["**resolvable pairs**"].split("|")[3].strip() == "1 / 0 / 2 (33 %)"
-    # B-C judged with B left out (48.5: refused) and with C left out (3.5: -4.5, merged); A-B
-    # with neither; A-C never (a rival)
-    assert rows["**all**"].split("|")[3].strip() == "1 / 6"
+    assert rows["**resolvable pairs**"].split("|")[3].strip() == "2 / 0 / 1 (67 %)"
+    # B-C judged with B left out (-19: merged) and with C left out (4.25: -3.75, merged); A-B
+    # with A left out (7.25: refused) and with B left out (merged); A-C never (a rival)
+    assert rows["**all**"].split("|")[3].strip() == "3 / 6"
+    # the stricter choice on the test alone is tabled too
+    assert "passes the test alone" in text and "in sample 49.25" in text
 
 
 def test_a_record_it_cannot_read_is_one_line_and_exit_2(lowo, tmp_path, capsys):

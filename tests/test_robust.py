@@ -16,8 +16,8 @@ from fusionkit.methods.consensus._graph import solve_graph
 from fusionkit.methods.consensus._hypotheses import Hypotheses, cluster_hypotheses
 from fusionkit.methods.consensus._pair import Candidate
 from fusionkit.methods.consensus._pair import displacement
-from fusionkit.methods.consensus._verify import (_one_way, _one_way_numpy, refine_cloud, refine_icp,
-                                       refine_icp_numpy, rigid_fit)
+from fusionkit.methods.consensus._verify import (_one_way, refine_cloud, refine_icp,
+                                                 refine_icp_numpy, rigid_fit)
 from fusionkit.errors import InputError
 from fusionkit.grid import OccupancyGrid
 from fusionkit.mapio import load_map
@@ -29,6 +29,25 @@ REPO = Path(__file__).resolve().parents[1]
 REAL = REPO / "maps" / "real"
 if not (REAL / "intel_lab.yaml").is_file():
     REAL = REPO.parent / "shared" / "maps" / "real"
+
+
+def _one_way_numpy(a, points_b: np.ndarray, t: Transform2D,
+                   b=None) -> tuple[int, int, int]:
+    """The count of :func:`_one_way` written plainly in numpy: the reference its kernel is
+    tested against."""
+    ri, ci, inside = a.cells(t(points_b))
+    keep = inside.copy()
+    if b is not None and points_b is b.points and len(b.sided) == len(points_b):
+        sr, sc, s_in = a.cells(t(b.sides))
+        s_known = np.zeros(len(points_b), bool)
+        s_known[s_in] = a.known[sr[s_in], sc[s_in]] & ~a.occupied[sr[s_in], sc[s_in]]
+        near_all = np.zeros(len(points_b), bool)
+        near_all[inside] = a.near[ri[inside], ci[inside]]
+        keep &= ~(near_all & b.sided & ~s_known)
+    ri, ci = ri[keep], ci[keep]
+    near = a.near[ri, ci]
+    n = int((a.known[ri, ci] | near).sum())
+    return n, int(near.sum()), int(a.clear[ri, ci].sum())
 
 
 @pytest.fixture(scope="module")
@@ -85,6 +104,9 @@ def test_verification_counts_match_the_numpy_reference(crop):
                         crop.truth.theta + rng.normal(0, 0.3))
         assert _one_way(a, b.points, t) == _one_way_numpy(a, b.points, t)
         assert _one_way(b, a.points, t.inverse) == _one_way_numpy(b, a.points, t.inverse)
+        # with the walls' sides (a wall seen from one side meets only in front of A's room)
+        assert _one_way(a, b.points, t, b) == _one_way_numpy(a, b.points, t, b)
+        assert _one_way(b, a.points, t.inverse, a) == _one_way_numpy(b, a.points, t.inverse, a)
 
 
 def test_displacement_is_the_largest_move_of_the_points():
@@ -339,3 +361,41 @@ def test_bad_settings_are_refused():
         ConsensusConfig(rotation_peaks=0)
     with pytest.raises(InputError):
         estimate_maps([make_world("cave", 0, size=(12.0, 10.0))])
+
+
+def _room_behind_wall(room_rows: slice, rows: int = 120, cols: int = 100) -> "OccupancyGrid":
+    """One room seen from inside: free cells in ``room_rows``, a 2-cell wall on each side of
+    it, unknown elsewhere (0.05 m cells)."""
+    from fusionkit.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+    data = np.full((rows, cols), UNKNOWN, np.int8)
+    r0, r1 = room_rows.start, room_rows.stop
+    data[r0 - 2:r1 + 2, 8:cols - 8] = OCCUPIED
+    data[r0:r1, 10:cols - 10] = FREE
+    return OccupancyGrid(data, 0.05, (0.0, 0.0, 0.0))
+
+
+def test_a_wall_seen_from_one_side_points_into_its_room():
+    from fusionkit.methods.consensus import prepare_maps
+    (a,) = prepare_maps([_room_behind_wall(slice(20, 60))])
+    # every wall cell of a room seen from inside has a side, and its point in front of it
+    # lies in the room (on free space)
+    assert a.sided.mean() > 0.95
+    ri, ci, inside = a.cells(a.sides[a.sided])
+    assert inside.all() and a.grid.free_mask()[ri, ci].mean() > 0.95
+
+
+def test_walls_that_meet_back_to_back_are_no_evidence():
+    """Two rooms on either side of one wall line (each map saw its own room): the shared wall
+    lines meet cell for cell, but the room in front of each lies where the other map knows
+    nothing, so they do not count as agreeing; the same room seen by both maps does."""
+    from fusionkit.methods.consensus import prepare_maps, verify
+    below = _room_behind_wall(slice(20, 60))          # walls at rows 18-19 and 60-61
+    above = _room_behind_wall(slice(62, 100))         # walls at rows 60-61 and 100-101
+    a, b = prepare_maps([below, above])
+    t = Transform2D(0.0, 0.0, 0.0)
+    walls_alone = _one_way(a, b.points, t)[1] + _one_way(b, a.points, t.inverse)[1]
+    assert walls_alone >= 2 * 80                      # the shared wall, both ways
+    assert verify(a, b, t).agreeing < 0.1 * walls_alone
+    a2, b2 = prepare_maps([below, _room_behind_wall(slice(20, 60))])
+    same = verify(a2, b2, t)
+    assert same.agreeing >= 0.95 * (len(a2.points) + len(b2.points))

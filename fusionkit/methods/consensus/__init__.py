@@ -46,7 +46,8 @@ from ._index import MapIndex, index_map
 from ._pair import Candidate, ConsensusConfig, PairResult, corners, estimate_indexed
 from ._search import evidence_raster, orientation_histogram
 from ._null import NullModel, null_model
-from ._verify import Check, forget_pairs, refine_icp, refine_pso, verify
+from ._memo import forget_pairs
+from ._verify import Check, refine_icp, refine_pso, verify
 
 __all__ = ["ConsensusConfig", "Check", "Candidate", "PairResult", "GraphResult", "MapsResult",
            "MapIndex", "prepare_maps", "estimate_pair", "estimate_maps", "verify", "refine_icp",

@@ -59,6 +59,12 @@ class MapIndex:
     cloud : (C, 2) float64
         Recorded scans only: the end points of the returned beams (m, map frame), one per
         ``cloud_spacing`` square; empty for virtual or no scans.
+    sides : (K, 2) float64
+        Per wall point, a point ``side_cells`` cells from it towards the free space it was seen
+        from (m, map frame): the room in front of that wall (:func:`free_sides`).
+    sided : (K,) bool
+        Whether that wall point was seen from one side only (free space on one side of it,
+        none on the other); a wall with free space on both sides, or none, has no side.
     cache : dict
         Products computed from the map on first use (its softened wall raster, the corners of
         its known area) and kept for the map's other pairs.
@@ -80,6 +86,8 @@ class MapIndex:
     spectra: np.ndarray
     ranges_fft: np.ndarray
     cloud: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    sides: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    sided: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     cache: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -121,6 +129,58 @@ def _label_cells(labels, wr, wc, out):
             k = labels[i, j] - 1
             out[0, i, j] = wr[k]
             out[1, i, j] = wc[k]
+
+
+#: Half-width (cells) of the window the free side of a wall cell is judged in.
+SIDE_WINDOW = 5
+#: Least asymmetry of the free space around a wall cell (the mean offset of the free cells in
+#: the window, over its largest value, free space filling one half) for it to have a side.
+SIDE_ASYMMETRY = 0.25
+
+
+def free_sides(free: np.ndarray, rows: np.ndarray, cols: np.ndarray, side_cells: float = 3.0
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For wall cells ``(rows, cols)``, the offset (cells, ``(d_col, d_row)``) ``side_cells``
+    long towards the free space around each (the sum of the offsets of the free cells in a
+    ``2 SIDE_WINDOW + 1`` square window), and whether that free space lies clearly on one side
+    (a wall seen from one side: the room in front of it), and whether any free cell is in the
+    window at all."""
+    w = SIDE_WINDOW
+    k = np.arange(-w, w + 1, dtype=np.float32)
+    kx = np.tile(k, (2 * w + 1, 1))                      # column offset of each window cell
+    f = free.astype(np.float32)
+    border = cv2.BORDER_CONSTANT
+    vx = cv2.filter2D(f, -1, kx, borderType=border)[rows, cols]
+    vy = cv2.filter2D(f, -1, np.ascontiguousarray(kx.T), borderType=border)[rows, cols]
+    # free space filling exactly one half of the window gives the largest mean offset
+    full = float(np.abs(k).sum() * (2 * w + 1)) / 2.0
+    norm = np.hypot(vx, vy)
+    sided = norm >= SIDE_ASYMMETRY * full
+    scale = np.where(norm > 0, side_cells / np.maximum(norm, 1e-9), 0.0)
+    seen = cv2.boxFilter(f, -1, (2 * w + 1, 2 * w + 1), normalize=False, borderType=border)[rows, cols] > 0
+    return np.stack([vx * scale, vy * scale], axis=1).astype(np.float64), sided, seen
+
+
+def _wall_sides(tri: OccupancyGrid, free: np.ndarray, occupied: np.ndarray, r: np.ndarray,
+                c: np.ndarray, side_cells: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per wall cell ``(r, c)``, the point (m) in front of it and whether it has one
+    (:attr:`MapIndex.sides`): from :func:`free_sides`; a cell deep inside a thick wall, with no
+    free space in its window, takes the point of the nearest wall cell that has one, within
+    ``2 SIDE_WINDOW`` cells."""
+    offsets, sided, seen = free_sides(free, r, c, side_cells)
+    sides = tri.cell_to_world(r + offsets[:, 1], c + offsets[:, 0])
+    if len(r) and sided.any() and not seen.all():
+        mask = np.zeros(occupied.shape, bool)
+        mask[r[sided], c[sided]] = True
+        dist, nearest = _nearest_walls(mask, (r[sided], c[sided]))
+        number = np.full(occupied.shape, -1, np.int64)
+        number[r, c] = np.arange(len(r))
+        inner = np.nonzero(~seen & (dist[r, c] <= 2 * SIDE_WINDOW))[0]
+        src = number[nearest[0, r[inner], c[inner]], nearest[1, r[inner], c[inner]]]
+        sides[inner] = sides[src]
+        sided = sided.copy()
+        sided[inner] = True
+    return np.ascontiguousarray(sides), sided
 
 
 def first_per_cell(points: np.ndarray, spacing: float) -> np.ndarray:
@@ -203,6 +263,7 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     clear = free & ~walls_close
     usable = (known | near).astype(np.uint8)
     points = tri.cell_to_world(r, c)
+    sides, sided = _wall_sides(tri, free, occupied, r, c, float(clear_cells))
     if len(points) > max_refine_points:
         step = len(points) / max_refine_points
         refine = points[(np.arange(max_refine_points) * step).astype(np.int64)]
@@ -211,7 +272,8 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     if log is None or log.n_scans == 0:
         return MapIndex(tri, known, occupied, near, usable, clear, dist, nearest, points,
                         np.ascontiguousarray(refine), log, bool(virtual), np.zeros(0, np.int64),
-                        np.zeros((0, 0), np.float32), np.zeros((0, 0), np.complex64))
+                        np.zeros((0, 0), np.float32), np.zeros((0, 0), np.complex64),
+                        np.zeros((0, 2)), sides, sided)
     idx = spread_indices(log.poses, pose_spacing, max_poses)
     ranges = log.clipped_ranges()[idx].astype(np.float64)
     spec = scan_spectra(ranges, dc=False)                      # eq. 1 without the DC bin
@@ -227,4 +289,4 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
         cloud = ends[first_per_cell(ends, cloud_spacing)]
     return MapIndex(tri, known, occupied, near, usable, clear, dist, nearest, points,
                     np.ascontiguousarray(refine), log, bool(virtual), idx, spec, rfft,
-                    np.ascontiguousarray(cloud))
+                    np.ascontiguousarray(cloud), sides, sided)

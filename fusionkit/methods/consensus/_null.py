@@ -15,8 +15,8 @@ import numpy as np
 
 from ...transform import Transform2D
 from ._index import MapIndex
-from ._verify import (DEFAULT_GATES, displacement, pair_memo, points_key, refine_memo,
-                      verify_memo)
+from ._memo import pair_memo, points_key, refine_memo, verify_memo
+from ._verify import DEFAULT_GATES, displacement
 
 __all__ = ["NullModel", "null_model", "search_tests"]
 
@@ -58,8 +58,9 @@ class NullModel:
     (:meth:`Check.evidence`) is not positive, the maps contradicting each other more than they
     agree, is given no evidence at all. Neither depends on the cell size,
     the extent or the clutter of the maps; all three enter through the maps' own wrong
-    placements. ``calibration`` (decades) is added to that count's logarithm: a margin chosen
-    on pairs of maps of different buildings (BENCHMARKS.md).
+    placements. ``calibration`` (decades) is added to that count's logarithm: an offset chosen
+    on pairs of maps of different buildings (BENCHMARKS.md), negative when the count, an upper
+    bound, is higher than the false alarms that occur.
     """
 
     fractions: np.ndarray

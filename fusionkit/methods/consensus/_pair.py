@@ -16,9 +16,9 @@ from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
 from ._null import NullModel, null_model
-from ._verify import (DEFAULT_GATES, Check, Placements, _in_cells, displacement, pair_memo,
-                      points_key, refine_cloud, refine_icp, refine_memo, refine_pso, verify,
-                      verify_memo)
+from ._memo import pair_memo, points_key, refine_memo, verify_memo
+from ._verify import (DEFAULT_GATES, Check, Placements, _in_cells, displacement, refine_cloud,
+                      refine_icp, refine_pso, verify)
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
 

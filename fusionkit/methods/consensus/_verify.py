@@ -15,7 +15,10 @@ Verification
 :func:`verify` moves each map's wall cells into the other and counts, where the other map is
 known, those within one cell of one of its walls (agreement) and those on its clear free space,
 at least three cells from any wall (conflict). A right placement agrees nearly everywhere both
-maps are known; a wrong one draws walls across the other map's open floor.
+maps are known; a wrong one draws walls across the other map's open floor. A wall seen from one
+side only (the room in front of it, :attr:`MapIndex.sides`) agrees only where the other map
+knows that room as free space: two buildings' outer walls laid back to back, or a thin wall
+laid along a thick one, meet cell for cell and yet are no evidence that the maps show one place.
 """
 
 from __future__ import annotations
@@ -181,62 +184,14 @@ def _in_cells(index: MapIndex, points: np.ndarray, resolution: float) -> np.ndar
     """``points`` (m) divided by ``resolution``, contiguous; for the map's own wall points
     (``index.points``, ``index.refine_points``) kept in its ``cache``, as every check and
     refinement of its pairs uses them."""
-    if points is index.points or points is index.refine_points:
-        key = ("cells", "points" if points is index.points else "refine", resolution)
+    if points is index.points or points is index.refine_points or points is index.sides:
+        key = ("cells", "points" if points is index.points else
+               "refine" if points is index.refine_points else "sides", resolution)
         got = index.cache.get(key)
         if got is None:
             got = index.cache[key] = np.ascontiguousarray(points / resolution, np.float64)
         return got
     return np.ascontiguousarray(points / resolution, np.float64)
-
-
-def pair_memo(a: MapIndex, b: MapIndex) -> dict:
-    """What has been computed for the pair (B placed in A) and will be asked again: the
-    refinements of the starts and the checks of their results, keyed by what they depend on.
-    A pair searched again exhaustively (the fall-back) meets most of its first search's
-    starts, and the null distribution its first draws, again. Kept in A's ``cache`` until
-    :func:`forget_pairs`."""
-    key = ("pairs", id(b))
-    got = a.cache.get(key)
-    if got is None or got[0] is not b:
-        got = a.cache[key] = (b, {})
-    return got[1]
-
-
-def forget_pairs(a: MapIndex) -> None:
-    """Drop what :func:`pair_memo` kept for A's pairs."""
-    for key in [k for k in a.cache if isinstance(k, tuple) and k and k[0] == "pairs"]:
-        a.cache.pop(key, None)
-
-
-def points_key(points: np.ndarray) -> tuple:
-    """A key that tells point sets apart in a :func:`pair_memo`."""
-    return (points.shape, hash(np.ascontiguousarray(points).tobytes()))
-
-
-def _key(t: Transform2D) -> tuple:
-    return (t.x, t.y, t.theta)
-
-
-def refine_memo(memo: dict, a: MapIndex, points: np.ndarray, name: tuple, start: Transform2D,
-                gates) -> Transform2D:
-    """:func:`refine_icp` of ``points`` (already in A's cells; ``name``, their
-    :func:`points_key`, tells them apart in the ``memo``) from ``start``, computed once per
-    start."""
-    key = ("icp", name, _key(start), tuple(gates))
-    got = memo.get(key)
-    if got is None:
-        got = memo[key] = refine_icp(a, points, start, gates=gates, cells=True)
-    return got
-
-
-def verify_memo(memo: dict, a: MapIndex, b: MapIndex, t: Transform2D) -> "Check":
-    """:func:`verify` of ``t``, computed once per placement."""
-    key = ("check", _key(t))
-    got = memo.get(key)
-    if got is None:
-        got = memo[key] = verify(a, b, t)
-    return got
 
 
 def refine_icp(a: MapIndex, points_b: np.ndarray, start: Transform2D, *,
@@ -357,7 +312,9 @@ class Check:
     overlap : int
         The smaller of the two counts of wall cells landing where the other map is known.
     agreeing : int
-        Wall cells (both directions) within one cell of the other map's walls.
+        Wall cells (both directions) within one cell of the other map's walls (a wall seen
+        from one side only where the other map knows the room in front of it as free space;
+        where it does not, the cell is not counted at all).
     disagreeing : int
         Wall cells (both directions) where the other map is known but has no wall within one cell.
     conflicts : int
@@ -398,11 +355,15 @@ class Check:
 
 
 @njit
-def _count_kernel(pts, tx, ty, th, state):
+def _count_kernel(pts, sides, sided, tx, ty, th, state):
     """For points (cells of a frame aligned with A's cells) moved by ``(tx, ty, th)``: how many
     land on A's known cells or beside its walls, how many beside its walls, how many on its
-    clear free space. ``state``: per cell, bit 0 beside a wall, bit 1 known, bit 2 clear
-    (:func:`_states`), one look-up per point."""
+    clear free space. ``state``: per cell, bit 0 beside a wall, bit 1 known, bit 2 clear,
+    bit 3 a wall (:func:`_states`), one look-up per point. A point that is ``sided`` (a wall seen from one
+    side) and lands beside A's walls while the room in front of it (``sides``, moved alike)
+    does not land on A's free space (known, not a wall: bit 3 of ``state``) is not counted at
+    all: the two walls meet, but A has not seen B's room in front of them (two outer walls
+    put back to back, or a thin wall laid along a thick one)."""
     rows, cols = state.shape
     c = math.cos(th)
     s = math.sin(th)
@@ -424,6 +385,11 @@ def _count_kernel(pts, tx, ty, th, state):
         if 0 <= ri < rows and 0 <= ci < cols:
             st = state[ri, ci]
             near = st & 1
+            if near and sided[k]:
+                sc = math.floor(c * sides[k, 0] - s * sides[k, 1] + tx)
+                sr = math.floor(s * sides[k, 0] + c * sides[k, 1] + ty)
+                if not (0 <= sr < rows and 0 <= sc < cols and state[sr, sc] & 10 == 2):
+                    continue
             n += near | ((st >> 1) & 1)
             m += near
             bad += (st >> 2) & 1
@@ -431,12 +397,12 @@ def _count_kernel(pts, tx, ty, th, state):
 
 
 def _states(a: MapIndex) -> np.ndarray:
-    """A's cells as bits: 1 beside a wall (``near``), 2 known, 4 clear free space (kept in
-    A's ``cache``)."""
+    """A's cells as bits: 1 beside a wall (``near``), 2 known, 4 clear free space, 8 a wall
+    (kept in A's ``cache``)."""
     st = a.cache.get("states")
     if st is None:
         st = (a.near.astype(np.uint8) | (a.known.astype(np.uint8) << 1)
-              | (a.clear.astype(np.uint8) << 2))
+              | (a.clear.astype(np.uint8) << 2) | (a.occupied.astype(np.uint8) << 3))
         a.cache["states"] = st
     return st
 
@@ -445,22 +411,18 @@ def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D,
              b: MapIndex | None = None) -> tuple[int, int, int]:
     """For B's walls moved by ``t``: how many land on A's known cells (or beside A's walls),
     how many beside A's walls, how many on A's clear free space (``b``: the map the points
-    belong to, whose cache keeps them in cells)."""
+    belong to, whose cache keeps them in cells; with ``b`` and its own ``points``, a wall seen
+    from one side counts only where A knows the room in front of it, :func:`_count_kernel`)."""
     if len(points_b) == 0:
         return 0, 0, 0
     cx, cy, cth = _to_cells(a, t)
     pts = _in_cells(b, points_b, a.resolution) if b is not None else points_b / a.resolution
-    n, m, bad = _count_kernel(pts, cx, cy, cth, _states(a))
+    if b is not None and points_b is b.points and len(b.sided) == len(points_b):
+        sides, sided = _in_cells(b, b.sides, a.resolution), b.sided
+    else:
+        sides, sided = np.zeros((len(pts), 2)), np.zeros(len(pts), np.bool_)
+    n, m, bad = _count_kernel(pts, sides, sided, cx, cy, cth, _states(a))
     return int(n), int(m), int(bad)
-
-
-def _one_way_numpy(a: MapIndex, points_b: np.ndarray, t: Transform2D) -> tuple[int, int, int]:
-    """The same count written plainly in numpy (the reference the kernel is tested against)."""
-    ri, ci, inside = a.cells(t(points_b))
-    ri, ci = ri[inside], ci[inside]
-    near = a.near[ri, ci]
-    n = int((a.known[ri, ci] | near).sum())
-    return n, int(near.sum()), int(a.clear[ri, ci].sum())
 
 
 def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:
