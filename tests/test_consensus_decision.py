@@ -247,3 +247,27 @@ def test_a_placement_that_contradicts_more_wall_than_it_explains_carries_no_evid
     assert null.nfa(contradicted) >= 1.0
     clean = Check(1.0, 1.0, 1.0, 1309, 2003, 0, 0, 0.0)
     assert null.nfa(clean) <= ConsensusConfig().max_false_merge
+
+
+def test_sessions_placed_through_a_middle_one_are_not_cut_apart(tmp_path):
+    """The Edmonton log split into three sessions: the first and the third share only the
+    edges of their areas, where each knows little of the other's rooms. Placed through the
+    second, they must not be judged to disagree for want of walls seen from the same room (the
+    cross check counts walls meeting walls whichever side they were seen from): all three are
+    merged, each within 3 cells of its true place."""
+    import json
+    from fusionkit.io_carmen import import_carmen
+    from fusionkit.pipeline import load_inputs
+    log = REPO.parent / "shared" / "logs" / "real" / "edmonton.gfs.log"
+    import_carmen(log, tmp_path, split=3)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    t_true = [Transform2D(**r["transform"]) for r in truth["robots"]]
+    grids, scans = load_inputs([str(tmp_path / f"robot_{i}.yaml") for i in (1, 2, 3)])
+    result = merge(grids, scans=scans, config=MergeConfig(method="consensus"))
+    for k in (1, 2):
+        t = result.placements[k].transform
+        assert t is not None, result.placements[k].reason
+        r, c = np.nonzero(grids[k].known_mask())
+        p = grids[k].cell_to_world(np.array([r.mean()]), np.array([c.mean()]))
+        true = t_true[0].inverse @ t_true[k]
+        assert np.hypot(*(t(p)[0] - true(p)[0])) <= 3 * grids[k].resolution

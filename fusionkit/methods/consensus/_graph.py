@@ -428,13 +428,16 @@ def _cross_check(a, b, t_ba: Transform2D, cfg: ConsensusConfig, box_b, tol: floa
     """The :class:`Check` of two placed maps when they disagree, else None.
 
     Placed through a chain, two maps carry the small errors of every link; they are let
-    off when a short refinement (within the loop tolerance) makes them agree.
+    off when a short refinement (within the loop tolerance) makes them agree. Walls meeting
+    walls count whichever room they were seen from: two maps placed through a third often
+    share only the edges of their areas, where each knows little of the other's rooms, and a
+    wrong link shows as walls on open floor, which this counts in full.
     """
-    chk = verify(a, b, t_ba)
+    chk = verify(a, b, t_ba, sides=False)
     if not _disagrees(chk, cfg):
         return None
     t2 = refine_icp(a, b.refine_points, t_ba, gates=(4.0, 3.0, 2.0))
-    if displacement(t2, t_ba, box_b) <= tol and not _disagrees(verify(a, b, t2), cfg):
+    if displacement(t2, t_ba, box_b) <= tol and not _disagrees(verify(a, b, t2, sides=False), cfg):
         return None
     return chk
 

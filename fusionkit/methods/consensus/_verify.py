@@ -408,27 +408,29 @@ def _states(a: MapIndex) -> np.ndarray:
 
 
 def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D,
-             b: MapIndex | None = None) -> tuple[int, int, int]:
+             b: MapIndex | None = None, sides: bool = True) -> tuple[int, int, int]:
     """For B's walls moved by ``t``: how many land on A's known cells (or beside A's walls),
     how many beside A's walls, how many on A's clear free space (``b``: the map the points
-    belong to, whose cache keeps them in cells; with ``b`` and its own ``points``, a wall seen
-    from one side counts only where A knows the room in front of it, :func:`_count_kernel`)."""
+    belong to, whose cache keeps them in cells; with ``b``, its own ``points`` and ``sides``, a
+    wall seen from one side counts only where A knows the room in front of it,
+    :func:`_count_kernel`)."""
     if len(points_b) == 0:
         return 0, 0, 0
     cx, cy, cth = _to_cells(a, t)
     pts = _in_cells(b, points_b, a.resolution) if b is not None else points_b / a.resolution
-    if b is not None and points_b is b.points and len(b.sided) == len(points_b):
-        sides, sided = _in_cells(b, b.sides, a.resolution), b.sided
+    if sides and b is not None and points_b is b.points and len(b.sided) == len(points_b):
+        front, sided = _in_cells(b, b.sides, a.resolution), b.sided
     else:
-        sides, sided = np.zeros((len(pts), 2)), np.zeros(len(pts), np.bool_)
-    n, m, bad = _count_kernel(pts, sides, sided, cx, cy, cth, _states(a))
+        front, sided = np.zeros((len(pts), 2)), np.zeros(len(pts), np.bool_)
+    n, m, bad = _count_kernel(pts, front, sided, cx, cy, cth, _states(a))
     return int(n), int(m), int(bad)
 
 
-def verify(a: MapIndex, b: MapIndex, t: Transform2D) -> Check:
-    """Check the transform ``t`` (B's frame -> A's frame) on both maps' walls."""
-    n_ab, near_ab, bad_ab = _one_way(a, b.points, t, b)
-    n_ba, near_ba, bad_ba = _one_way(b, a.points, t.inverse, a)
+def verify(a: MapIndex, b: MapIndex, t: Transform2D, *, sides: bool = True) -> Check:
+    """Check the transform ``t`` (B's frame -> A's frame) on both maps' walls (without
+    ``sides``, a wall meeting a wall agrees whichever room it was seen from)."""
+    n_ab, near_ab, bad_ab = _one_way(a, b.points, t, b, sides)
+    n_ba, near_ba, bad_ba = _one_way(b, a.points, t.inverse, a, sides)
     f_ab = near_ab / n_ab if n_ab else 0.0
     f_ba = near_ba / n_ba if n_ba else 0.0
     total = n_ab + n_ba
