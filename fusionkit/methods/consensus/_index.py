@@ -143,7 +143,7 @@ def free_sides(free: np.ndarray, rows: np.ndarray, cols: np.ndarray, side_cells:
     """For wall cells ``(rows, cols)``, the offset (cells, ``(d_col, d_row)``) ``side_cells``
     long towards the free space around each (the sum of the offsets of the free cells in a
     ``2 SIDE_WINDOW + 1`` square window), and whether that free space lies clearly on one side
-    (a wall seen from one side: the room in front of it), and whether any free cell is in the
+    (a wall seen from one side: the room in front of it); and whether any free cell is in the
     window at all."""
     w = SIDE_WINDOW
     k = np.arange(-w, w + 1, dtype=np.float32)
@@ -161,8 +161,8 @@ def free_sides(free: np.ndarray, rows: np.ndarray, cols: np.ndarray, side_cells:
     return np.stack([vx * scale, vy * scale], axis=1).astype(np.float64), sided, seen
 
 
-def _wall_sides(tri: OccupancyGrid, free: np.ndarray, occupied: np.ndarray, r: np.ndarray,
-                c: np.ndarray, side_cells: float) -> tuple[np.ndarray, np.ndarray]:
+def _wall_sides(tri: OccupancyGrid, free: np.ndarray, r: np.ndarray, c: np.ndarray,
+                side_cells: float) -> tuple[np.ndarray, np.ndarray]:
     """Per wall cell ``(r, c)``, the point (m) in front of it and whether it has one
     (:attr:`MapIndex.sides`): from :func:`free_sides`; a cell deep inside a thick wall, with no
     free space in its window, takes the point of the nearest wall cell that has one, within
@@ -170,10 +170,10 @@ def _wall_sides(tri: OccupancyGrid, free: np.ndarray, occupied: np.ndarray, r: n
     offsets, sided, seen = free_sides(free, r, c, side_cells)
     sides = tri.cell_to_world(r + offsets[:, 1], c + offsets[:, 0])
     if len(r) and sided.any() and not seen.all():
-        mask = np.zeros(occupied.shape, bool)
+        mask = np.zeros(free.shape, bool)
         mask[r[sided], c[sided]] = True
         dist, nearest = _nearest_walls(mask, (r[sided], c[sided]))
-        number = np.full(occupied.shape, -1, np.int64)
+        number = np.full(free.shape, -1, np.int64)
         number[r, c] = np.arange(len(r))
         inner = np.nonzero(~seen & (dist[r, c] <= 2 * SIDE_WINDOW))[0]
         src = number[nearest[0, r[inner], c[inner]], nearest[1, r[inner], c[inner]]]
@@ -263,7 +263,7 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     clear = free & ~walls_close
     usable = (known | near).astype(np.uint8)
     points = tri.cell_to_world(r, c)
-    sides, sided = _wall_sides(tri, free, occupied, r, c, float(clear_cells))
+    sides, sided = _wall_sides(tri, free, r, c, float(clear_cells))
     if len(points) > max_refine_points:
         step = len(points) / max_refine_points
         refine = points[(np.arange(max_refine_points) * step).astype(np.int64)]

@@ -359,11 +359,11 @@ def _count_kernel(pts, sides, sided, tx, ty, th, state):
     """For points (cells of a frame aligned with A's cells) moved by ``(tx, ty, th)``: how many
     land on A's known cells or beside its walls, how many beside its walls, how many on its
     clear free space. ``state``: per cell, bit 0 beside a wall, bit 1 known, bit 2 clear,
-    bit 3 a wall (:func:`_states`), one look-up per point. A point that is ``sided`` (a wall seen from one
-    side) and lands beside A's walls while the room in front of it (``sides``, moved alike)
-    does not land on A's free space (known, not a wall: bit 3 of ``state``) is not counted at
-    all: the two walls meet, but A has not seen B's room in front of them (two outer walls
-    put back to back, or a thin wall laid along a thick one)."""
+    bit 3 a wall (:func:`_states`), one look-up per point. A point that is ``sided`` (a wall
+    seen from one side) and lands beside A's walls while the room in front of it (``sides``,
+    moved alike; read only for sided points) does not land on A's free space (known, not a
+    wall) is not counted at all: the two walls meet, but A has not seen B's room in front of
+    them (two outer walls put back to back, or a thin wall laid along a thick one)."""
     rows, cols = state.shape
     c = math.cos(th)
     s = math.sin(th)
@@ -421,7 +421,7 @@ def _one_way(a: MapIndex, points_b: np.ndarray, t: Transform2D,
     if sides and b is not None and points_b is b.points and len(b.sided) == len(points_b):
         front, sided = _in_cells(b, b.sides, a.resolution), b.sided
     else:
-        front, sided = np.zeros((len(pts), 2)), np.zeros(len(pts), np.bool_)
+        front, sided = np.zeros((0, 2)), np.zeros(len(pts), np.bool_)     # no point is sided
     n, m, bad = _count_kernel(pts, front, sided, cx, cy, cth, _states(a))
     return int(n), int(m), int(bad)
 
