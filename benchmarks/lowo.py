@@ -57,7 +57,7 @@ confidence. Prints Markdown tables; ``--out`` records every pair (JSON, written 
 
 Default sizes: 5 crops, 2 explorations and 2 drifting explorations per real floor, 6 crops and 6
 explorations per repetitive world, the logs at K = 2, 3, 4, one negative per positive: 246
-positives and 246 negatives, about 1370 s on the project's 2-core machine beside a second run
+positives and 246 negatives, about 1600 s on the project's 2-core machine beside a second run
 (``benchmarks/records/lowo_seed1.json`` and ``lowo_seed2.json`` are the records of ``--seed 1``
 and ``--seed 2``). ``--quick``: 4 floors, one pair of
 each kind, K = 2, spectral-pso left out: 40 pairs in about 80 s.

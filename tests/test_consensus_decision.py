@@ -212,6 +212,66 @@ def test_small_windows_of_one_floor_that_fit_with_no_rival_are_merged(seed):
     assert right(est.transform, crop)
 
 
+@pytest.mark.parametrize("seed", [1, 9])
+def test_small_windows_of_a_cluttered_lab_that_fit_perfectly_are_merged(seed):
+    """Two 5.5 m windows of the Georgia Tech lab: their walls meet over 28-34 m, nearly all of
+    them, where wrong placements meet a tenth of theirs and all fit about equally badly (their
+    shares spread hardly more than those of independent cells: one trial per 1.5-2 m of wall).
+    Counted at one trial per 6 m of wall whatever the maps, such a pair is refused as too few
+    walls to be sure."""
+    crop = crop_pair(load_map(REAL / "gatech_ilab.yaml"), np.random.default_rng(seed), size=110,
+                     min_overlap=0.15)
+    est = estimate_pair(crop.a, crop.b)
+    pr = est.diagnostics["pair"]
+    assert est.accepted and right(est.transform, crop)
+    assert pr.null.design * crop.a.resolution < 3.0
+    fixed = ConsensusConfig(wall_correlation=6.0, wall_correlation_max=6.0)
+    assert not estimate_pair(crop.a, crop.b, config=fixed).accepted
+
+
+def test_small_windows_of_two_buildings_are_not_merged():
+    """Windows of the same size of two buildings (the Yujin office and the Georgia Tech lab):
+    every placement is wrong, and the wrong placements drawn from these very maps say so."""
+    office, lab = load_map(REAL / "yujin_office_run1.yaml"), load_map(REAL / "gatech_ilab.yaml")
+    for seed in range(4):
+        rng = np.random.default_rng(seed)
+        a = crop_pair(office, rng, size=150, min_overlap=0.15).a
+        b = crop_pair(lab, rng, size=150, min_overlap=0.15).b
+        est = estimate_pair(a, b)
+        assert not est.accepted and est.diagnostics["pair"].reason, seed
+
+
+def test_rows_of_identical_rooms_count_fewer_independent_walls():
+    """In a row of identical rooms a wrong placement now and then lines up whole walls, so the
+    fits of wrong placements spread widely: the test counts one trial per 6 m of wall there
+    (its greatest length), against 1.5-2 m for the cluttered lab above."""
+    world = _rooms(8)
+    a = _window(world, 4.0, 16.0, Transform2D.identity())
+    b = _window(world, 8.0, 20.0, Transform2D.identity())
+    pr = estimate_pair(a, b).diagnostics["pair"]
+    cfg = ConsensusConfig()
+    assert pr.null.design * a.resolution == pytest.approx(cfg.wall_correlation_max)
+
+
+@pytest.mark.parametrize("settings, name", [
+    ({"wall_correlation": 6.0, "wall_correlation_max": 3.0}, "wall_correlation_max"),
+    ({"test_basin": 0.0}, "test_basin"), ({"wall_correlation": -1.0}, "wall_correlation")])
+def test_bad_lengths_of_the_test_are_refused(settings, name):
+    with pytest.raises(InputError, match=name):
+        ConsensusConfig(**settings)
+
+
+def test_the_count_of_placements_tested_does_not_depend_on_the_cell_size(intel_crop):
+    """The number of distinct placements a search can end on (the tests the count of false
+    alarms is multiplied by) is counted in metres: the same two maps at half the cell size
+    get the same count, up to the cells on the edges of the known area."""
+    from fusionkit.methods.consensus import prepare_maps
+    from fusionkit.methods.consensus._null import search_tests
+    coarse = search_tests(*prepare_maps([intel_crop.a, intel_crop.b]))
+    fine = search_tests(*prepare_maps([_finer(intel_crop.a), _finer(intel_crop.b)]))
+    assert fine == pytest.approx(coarse, rel=0.1)
+
+
 @pytest.mark.parametrize("seed, placement", [(6, (-29.7433, 9.8462, -2.42401)),
                                              (26, (-23.2456, 2.2567, -2.10894))])
 def test_two_buildings_whose_walls_happen_to_fit_are_not_merged(seed, placement):

@@ -132,6 +132,7 @@ def placement_confidence(a: MapIndex, b: MapIndex, t, *, config: ConsensusConfig
                          distinct=config.distinct_cells * a.resolution,
                          points=b.refine_points[:: max(1, len(b.refine_points) // config.coarse_points)],
                          calibration=config.calibration, correlation=config.wall_correlation,
+                         correlation_max=config.wall_correlation_max, basin=config.test_basin,
                          seed=np.random.default_rng(seed))
     nfa = null.nfa(verify(a, b, t))
     return math.exp(-nfa) if math.isfinite(nfa) else 0.0

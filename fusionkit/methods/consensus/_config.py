@@ -41,10 +41,20 @@ class ConsensusConfig:
         leave-one-world-out; the higher of two draws of pairs). It may be negative: the
         model's count is an upper bound (a Chernoff bound, every basin of the search counted
         as a test).
-    wall_correlation : float
-        Length of wall (m) along which cells agree or not together: one independent trial of
-        the test (:class:`NullModel`), so that it weighs metres of wall, not cells. Chosen with
-        ``calibration`` by leave-one-world-out (BENCHMARKS.md).
+    wall_correlation, wall_correlation_max : float
+        Least and greatest length of wall (m) along which cells agree or not together: one
+        independent trial of the test (:class:`NullModel`), so that it weighs metres of wall,
+        not cells. Between the two it is measured on the maps' own wrong placements (how much
+        more their shares of meeting walls spread than independent cells would): short for
+        small cluttered maps, whose wrong placements all fit about equally badly; the greatest
+        for long straight walls and rows of identical rooms, where a wrong placement now and
+        then lines up whole walls. Chosen with ``calibration`` by leave-one-world-out
+        (BENCHMARKS.md).
+    test_basin : float
+        Width (m) of the placements the test counts as distinct tests (the number of false
+        alarms is the chance of one wrong placement times their number,
+        :func:`~fusionkit.methods.consensus._null.search_tests`): in metres, so that the same two
+        maps get the same count at any cell size. Chosen with ``calibration``.
     cloud_shift : float
         Largest move (cells) the refinement on recorded scans may make to a placement.
     rival : float
@@ -128,8 +138,10 @@ class ConsensusConfig:
     max_false_merge: float = 0.01
     null_samples: int = 64
     null_wide_points: int = 0
-    calibration: float = -0.25
-    wall_correlation: float = 6.0
+    calibration: float = 3.25
+    wall_correlation: float = 1.5
+    wall_correlation_max: float = 6.0
+    test_basin: float = 0.4
     cloud_shift: float = 4.0
     rival: float = 0.6
     distinct_cells: float = 6.0
@@ -178,10 +190,13 @@ class ConsensusConfig:
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
                 raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
         for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells", "fallback_step",
-                     "cloud_shift", "wall_correlation"):
+                     "cloud_shift", "wall_correlation", "wall_correlation_max", "test_basin"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a positive number, got {v!r}")
+        if self.wall_correlation_max < self.wall_correlation:
+            raise InputError(f"wall_correlation_max ({self.wall_correlation_max}) must be at least "
+                             f"wall_correlation ({self.wall_correlation})")
         v = self.null_margin
         if not (isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0):
             raise InputError(f"null_margin is a positive number of decades (inf: never stop "

@@ -46,9 +46,12 @@ class NullModel:
     cell on clear free space counting as three misses) and ``trials`` the cells compared.
     ``p0`` is their pooled share: the chance that a wall cell meets a wall at a wrong placement.
     Wall cells come in lines, so neighbouring cells agree or not together: ``design`` is the
-    number of cells along ``correlation`` metres of wall (the cells of one map that move as one
-    piece of wall), and a placement's cells count as ``trials / design`` independent ones, so
-    that the test weighs metres of wall, not cells, and means the same at any cell size.
+    number of cells that count as one independent trial (the design effect), and a placement's
+    cells count as ``trials / design`` independent ones, so that the test weighs metres of
+    wall, not cells, and means the same at any cell size. It is measured on the wrong
+    placements (the variance of their shares over that of independent cells), within a least
+    and a greatest length of wall (:func:`null_model`'s ``correlation`` and
+    ``correlation_max``), or fixed at ``correlation`` metres.
 
     A placement whose share ``f > p0`` of ``n`` compared cells is then reached by one wrong
     placement with probability at most ``exp(-(n / design) KL(f || p0))`` (Chernoff), and its
@@ -119,26 +122,29 @@ def _z_quantile(risk: float) -> float:
     return float(-ndtri(risk))
 
 
-def search_tests(a: MapIndex, b: MapIndex, basin_cells: float = 8.0, ) -> float:
+def search_tests(a: MapIndex, b: MapIndex, basin: float = 0.4) -> float:
     """Distinct placements of B in A a search can end on: where B's centre can land on A's
-    known area, and at which rotation, counted in ICP basins (``basin_cells`` cells wide,
-    the widest pairing gate; the rotation step that moves B's farthest wall by that much)."""
-    known = float(np.count_nonzero(a.known))
-    positions = max(known / (basin_cells * basin_cells), 1.0)
+    known area, and at which rotation, counted in basins ``basin`` metres wide (the rotation
+    step that moves B's farthest wall by that much). Counted in metres, not cells, the number
+    is the same for the same two maps at any cell size (0.4 m: the ICP's widest pairing gate
+    at 0.05 m cells)."""
+    known = float(np.count_nonzero(a.known)) * a.resolution * a.resolution
+    positions = max(known / (basin * basin), 1.0)
     if len(b.points):
         centre = b.points.mean(axis=0)
-        reach = float(np.sqrt(((b.points - centre) ** 2).sum(axis=1)).max()) / b.resolution
+        reach = float(np.sqrt(((b.points - centre) ** 2).sum(axis=1)).max())
     else:
-        reach = 1.0
-    rotations = max(2 * math.pi * max(reach, basin_cells) / basin_cells, 1.0)
+        reach = basin
+    rotations = max(2 * math.pi * max(reach, basin) / basin, 1.0)
     return positions * rotations
 
 
 def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray, *,
                samples: int = 64, distinct: float, points: np.ndarray | None = None,
                calibration: float = 0.0, correlation: float = 3.0,
-               settled=None, batch: int = 16, least: int = 32,
-               wide_points: int = 0, seed=0) -> tuple[NullModel, list]:
+               correlation_max: float | None = None, basin: float = 0.4, settled=None,
+               batch: int = 16, least: int = 32, wide_points: int = 0,
+               seed=0) -> tuple[NullModel, list]:
     """Sample the evidence of wrong placements of B in A (see :class:`NullModel`).
 
     Parameters
@@ -156,7 +162,12 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
         See :class:`NullModel`.
     correlation : float
         Length of wall (m) whose cells agree or not together: one independent trial of the
-        test (see :class:`NullModel`).
+        test (see :class:`NullModel`); with ``correlation_max``, the least such length.
+    correlation_max : float, optional
+        Measure that length from the wrong placements themselves (how much more their shares
+        spread than independent cells would), bounded by ``correlation`` and this (m).
+    basin : float
+        Width (m) of the placements counted as tests (:func:`search_tests`).
     settled : callable(NullModel, list) -> bool, optional
         Sequential sampling: after every ``batch`` wrong placements, the model of those drawn
         so far and the placements themselves are passed to ``settled``; when it answers that
@@ -181,7 +192,7 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
     rng = np.random.default_rng(seed)
     pts = b.refine_points if points is None else points
     out = []
-    tests = search_tests(a, b)
+    tests = search_tests(a, b, basin)
     wide = pts
     if 0 < wide_points < len(pts):
         wide = pts[np.linspace(0, len(pts) - 1, wide_points).astype(np.int64)]
@@ -213,26 +224,33 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
             out.append((t, verify_memo(memo, a, b, t)))
             if (settled is not None and len(out) >= least and len(out) % batch == 0
                     and len(out) < samples):
-                model = _fit(out, a.resolution, tests, calibration, correlation)
+                model = _fit(out, a.resolution, tests, calibration, correlation, correlation_max)
                 if model.usable and settled(model, out):
                     break
-    return _fit(out, a.resolution, tests, calibration, correlation), out
+    return _fit(out, a.resolution, tests, calibration, correlation, correlation_max), out
 
 
 def _fit(out: list, resolution: float, tests: float, calibration: float,
-         correlation: float) -> NullModel:
+         correlation: float, correlation_max: float | None = None) -> NullModel:
     """The null model of the wrong placements ``out`` (``(Transform2D, Check)`` pairs)."""
     kn = np.array([_trials(chk) for _, chk in out], float).reshape(-1, 2)
     kn = kn[kn[:, 1] > 0]
     if len(kn):
         f = kn[:, 0] / kn[:, 1]
         p0 = float(kn[:, 0].sum() / kn[:, 1].sum())
-        # the design effect is not measured from the wrong placements: their spread mixes the
-        # correlation of neighbouring cells with how often a wrong placement happens to line
-        # up a whole wall, and 32 to 64 of them measure it only roughly; a fixed length of wall
-        # per independent trial ranks placements of unseen maps better (leave-one-world-out,
-        # BENCHMARKS.md) and leaves the calibration far steadier from one set of maps to another
         design = max(correlation / resolution, 1.0)
+        if correlation_max is not None and len(kn) >= 8 and 0.0 < p0 < 1.0:
+            # the design effect of the wrong placements themselves: how much more their shares
+            # spread about ``p0`` than shares of independent cells would (variance ratio, in
+            # cells). It holds both the correlation of neighbouring cells and how often a
+            # wrong placement lines up whole walls: long straight walls and rows of identical
+            # rooms or racks, which make wrong placements fit far better than chance, spread
+            # them widely (6-16 m), small cluttered maps hardly (1-4 m): the test then weighs
+            # a wall that fits perfectly over 20 m of such a map as the evidence it is. Bounded,
+            # as 32 to 64 wrong placements measure it only roughly.
+            spread = float(np.mean((f - p0) ** 2 * kn[:, 1]) / (p0 * (1.0 - p0)))
+            design = min(max(spread, correlation / resolution), correlation_max / resolution)
+            design = max(design, 1.0)
     else:
         f, p0, design = np.zeros(0), 1.0, 1.0
     return NullModel(f, kn[:, 1], p0, design, tests, calibration)

@@ -286,7 +286,9 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
 
     null, wrong = null_model(a, b, best.transform, box, samples=cfg.null_samples,
                              distinct=distinct, points=thin, calibration=cfg.calibration,
-                             correlation=cfg.wall_correlation, settled=settled,
+                             correlation=cfg.wall_correlation,
+                             correlation_max=cfg.wall_correlation_max,
+                             basin=cfg.test_basin, settled=settled,
                              wide_points=cfg.null_wide_points, seed=rng)
 
     def judged(c: Candidate) -> Candidate:
