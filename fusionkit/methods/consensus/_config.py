@@ -38,9 +38,10 @@ class ConsensusConfig:
         pairs of maps of two different buildings, where every placement is wrong: the least
         offset at which the whole decision (the test and the rival test) merges none of them,
         plus one decade for the spread from one set of maps to another (BENCHMARKS.md,
-        leave-one-world-out; the higher of two draws of pairs). It may be negative: the
-        model's count is an upper bound (a Chernoff bound, every basin of the search counted
-        as a test).
+        leave-one-world-out; the highest of five draws of pairs). It may be negative (the
+        model's count is an upper bound: a Chernoff bound, every basin of the search counted
+        as a test) or positive (the wrong placements drawn at random rotations miss some that
+        a search finds).
     wall_correlation, wall_correlation_max : float
         Least and greatest length of wall (m) along which cells agree or not together: one
         independent trial of the test (:class:`NullModel`), so that it weighs metres of wall,
