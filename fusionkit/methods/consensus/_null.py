@@ -245,7 +245,7 @@ def _fit(out: list, resolution: float, tests: float, calibration: float,
             # cells). It holds both the correlation of neighbouring cells and how often a
             # wrong placement lines up whole walls: long straight walls and rows of identical
             # rooms or racks, which make wrong placements fit far better than chance, spread
-            # them widely (6-16 m), small cluttered maps hardly (1-4 m): the test then weighs
+            # them widely (about 10-16 m), small cluttered maps hardly (1-4 m): the test then weighs
             # a wall that fits perfectly over 20 m of such a map as the evidence it is. Bounded,
             # as 32 to 64 wrong placements measure it only roughly.
             spread = float(np.mean((f - p0) ** 2 * kn[:, 1]) / (p0 * (1.0 - p0)))
