@@ -139,7 +139,7 @@ class ConsensusConfig:
     max_false_merge: float = 0.01
     null_samples: int = 64
     null_wide_points: int = 0
-    calibration: float = 3.25
+    calibration: float = 3.75
     wall_correlation: float = 1.5
     wall_correlation_max: float = 6.0
     test_basin: float = 0.4
