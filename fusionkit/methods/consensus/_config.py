@@ -38,7 +38,7 @@ class ConsensusConfig:
         pairs of maps of two different buildings, where every placement is wrong: the least
         offset at which the whole decision (the test and the rival test) merges none of them,
         plus one decade for the spread from one set of maps to another (BENCHMARKS.md,
-        leave-one-world-out; the highest of five draws of pairs). It may be negative (the
+        leave-one-world-out; the highest of nine draws of pairs). It may be negative (the
         model's count is an upper bound: a Chernoff bound, every basin of the search counted
         as a test) or positive (the wrong placements drawn at random rotations miss some that
         a search finds).

@@ -238,19 +238,18 @@ def _fit(out: list, resolution: float, tests: float, calibration: float,
     if len(kn):
         f = kn[:, 0] / kn[:, 1]
         p0 = float(kn[:, 0].sum() / kn[:, 1].sum())
-        design = max(correlation / resolution, 1.0)
+        design = correlation / resolution
         if correlation_max is not None and len(kn) >= 8 and 0.0 < p0 < 1.0:
             # the design effect of the wrong placements themselves: how much more their shares
             # spread about ``p0`` than shares of independent cells would (variance ratio, in
-            # cells). It holds both the correlation of neighbouring cells and how often a
-            # wrong placement lines up whole walls: long straight walls and rows of identical
-            # rooms or racks, which make wrong placements fit far better than chance, spread
-            # them widely (about 10-16 m), small cluttered maps hardly (1-4 m): the test then weighs
-            # a wall that fits perfectly over 20 m of such a map as the evidence it is. Bounded,
-            # as 32 to 64 wrong placements measure it only roughly.
+            # cells). It holds both the correlation of neighbouring cells and how often a wrong
+            # placement lines up whole walls: long straight walls and rows of identical rooms or
+            # racks spread them widely (about 10-16 m), small cluttered maps hardly (1-4 m), so
+            # a wall that fits perfectly over 20 m of such a map weighs as the evidence it is.
+            # Bounded, as 32 to 64 wrong placements measure it only roughly.
             spread = float(np.mean((f - p0) ** 2 * kn[:, 1]) / (p0 * (1.0 - p0)))
-            design = min(max(spread, correlation / resolution), correlation_max / resolution)
-            design = max(design, 1.0)
+            design = min(max(spread, design), correlation_max / resolution)
+        design = max(design, 1.0)
     else:
         f, p0, design = np.zeros(0), 1.0, 1.0
     return NullModel(f, kn[:, 1], p0, design, tests, calibration)
