@@ -190,6 +190,49 @@ def test_an_ambiguous_map_lists_its_rival_placements():
     assert min(t.error_to(truth)[0] for t, _ in p.rivals) < 3 * case.grids[0].resolution
 
 
+def test_a_wrong_placement_far_beyond_chance_but_visibly_worse_is_no_rival():
+    """Two windows of the warehouse where the truth meets every wall and the next best placement,
+    racks away, two thirds of its walls: both are many decades beyond chance, but they are not
+    nearly as good as each other, and the pair is merged at the truth."""
+    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
+    spec = CaseSpec(0, WorldSpec("warehouse", builtin="warehouse"), "crop", 2, 1328982438)
+    case = make_case(spec, BenchConfig(robots=(2,), seed=1))
+    truth = case.truth[0].inverse @ case.truth[1]
+    est = estimate_pair(case.grids[0], case.grids[1], scans_a=case.scans[0],
+                        scans_b=case.scans[1], seed=2438)
+    pr = est.diagnostics["pair"]
+    assert est.accepted and pr.diagnostics["rivals"] == 0, pr.reason
+    d, r = est.transform.error_to(truth)
+    assert d < 3 * case.grids[0].resolution and r < math.radians(2.0)
+    second = pr.refined[1]
+    assert second.nfa < 1e-10 and second.check.score < 0.9 and pr.best.check.score > 0.99
+
+
+def _check(agreeing: int, missing: int):
+    from fusionkit.methods.consensus._verify import Check
+    share = agreeing / (agreeing + missing)
+    return Check(share, share, share, agreeing + missing, agreeing, missing, 0, 0.0)
+
+
+def test_which_distinct_placement_is_a_rival():
+    from fusionkit.methods.consensus._null import NullModel
+    from fusionkit.methods.consensus._pair import is_rival
+    # wrong placements meet a tenth of their walls; 20 cells a trial; 10^5 placements tested
+    null = NullModel(np.full(16, 0.1), np.full(16, 500.0), 0.1, 20.0, 1e5)
+    best = _check(1000, 0)                  # every wall meets: 10^-45
+    # 71 % of a larger overlap: 10^-44, within a decade, but significantly fewer walls meet
+    assert null.log10_nfa(_check(1500, 600)) - null.log10_nfa(best) < 1.0
+    assert not is_rival(null, best, _check(1500, 600), 0.01, 0.6)
+    # 70 % of the evidence with about the same share: a rival however far apart in decades
+    assert null.log10_nfa(_check(700, 5)) - null.log10_nfa(best) > 10.0
+    assert is_rival(null, best, _check(700, 5), 0.01, 0.6)
+    # a best that barely passes (10^-2.5) and a placement that fails within two decades of it
+    # (10^-1.2, with half its evidence): they stand or fall together
+    barely = _check(150, 0)
+    assert null.log10_nfa(barely) < -2.0 < null.log10_nfa(_check(228, 152))
+    assert is_rival(null, barely, _check(228, 152), 0.01, 0.6)
+
+
 def test_a_merged_map_reports_how_far_its_walls_stay_from_the_others(intel_crop):
     result = merge([intel_crop.a, intel_crop.b], config=MergeConfig(method="consensus"))
     assert result.placements[1].residual is not None

@@ -113,6 +113,26 @@ def _corners(index: MapIndex) -> np.ndarray:
     return index.grid.cell_to_world(rr, cc)
 
 
+def is_rival(null: NullModel, best, other, risk: float, fraction: float) -> bool:
+    """Whether a distinct placement with check ``other`` is nearly as good as the best one
+    (check ``best``), which then cannot be accepted alone.
+
+    It is when it is nearly as sure (its false alarms at most ``1 / risk`` times the best's),
+    unless both pass the test and the best meets walls significantly more often; or when, with
+    at least ``fraction`` times the best's evidence, it meets walls about as often (the two
+    shares not significantly apart at ``risk``, with the design effect). It need not pass the
+    test itself: fitting nearly as well elsewhere is enough to make the best unsure. Two
+    placements that both pass are told apart by their shares, not by how far beyond chance
+    each is: in rows of racks the truth and a wrong placement can both be 20 decades beyond
+    chance, the one meeting every wall and the other two thirds of them.
+    """
+    lg_best, lg_other = null.log10_nfa(best), null.log10_nfa(other)
+    apart = null.distinguishable(best, other, risk)
+    sure = lg_other <= math.log10(risk)
+    return ((lg_other - lg_best < -math.log10(risk) and not (sure and apart))
+            or (other.evidence() >= fraction * best.evidence() and not apart))
+
+
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
                      evidence_a: EvidenceRaster, ia: int = 0, ib: int = 1, seed=0,
                      exhaustive: bool = False, tree_a=None) -> PairResult:
@@ -303,14 +323,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     others.sort(key=lambda c: -c.rank)
     rivals: list[Candidate] = []
     for c in others:
-        # a rival: nearly as sure as the best (its false alarms at most 1 / max_false_merge
-        # times the best's) or, with at least ``rival`` times the best's evidence, meeting
-        # walls about as often (the shares not significantly apart); it need not pass the test
-        # itself: fitting nearly as well elsewhere is enough to make the best unsure
-        lg_c = null.log10_nfa(c.check)
-        near = (lg_c - log_nfa < -math.log10(eps)
-                or (c.rank >= cfg.rival * best.rank
-                    and not null.distinguishable(best.check, c.check, eps)))
+        near = is_rival(null, best.check, c.check, eps, cfg.rival)
         if c.rank > 0 and near and all(
                 displacement(c.transform, r.transform, box) > distinct for r in rivals):
             rivals.append(c)
