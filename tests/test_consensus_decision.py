@@ -191,9 +191,10 @@ def test_an_ambiguous_map_lists_its_rival_placements():
 
 
 def test_a_wrong_placement_far_beyond_chance_but_visibly_worse_is_no_rival():
-    """Two windows of the warehouse where the truth meets every wall and the next best placement,
-    racks away, two thirds of its walls: both are many decades beyond chance, but they are not
-    nearly as good as each other, and the pair is merged at the truth."""
+    """Two windows of the warehouse where the truth meets every wall; a placement 20 m away and
+    turned half a turn meets two thirds of its walls, and both are more than 20 decades beyond
+    chance, within two decades of each other. They are not nearly as good as each other: the
+    pair is merged at the truth."""
     from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
     spec = CaseSpec(0, WorldSpec("warehouse", builtin="warehouse"), "crop", 2, 1328982438)
     case = make_case(spec, BenchConfig(robots=(2,), seed=1))
@@ -204,8 +205,12 @@ def test_a_wrong_placement_far_beyond_chance_but_visibly_worse_is_no_rival():
     assert est.accepted and pr.diagnostics["rivals"] == 0, pr.reason
     d, r = est.transform.error_to(truth)
     assert d < 3 * case.grids[0].resolution and r < math.radians(2.0)
-    second = pr.refined[1]
-    assert second.nfa < 1e-10 and second.check.score < 0.9 and pr.best.check.score > 0.99
+    best = pr.best
+    assert best.check.score > 0.99 and best.nfa < 1e-20
+    near = [c for c in pr.refined[1:]
+            if math.log10(c.nfa) - math.log10(best.nfa) < 2.0 and c.check.score < 0.7
+            and c.transform.error_to(best.transform)[0] > 10.0]
+    assert near, [(c.nfa, c.check.score) for c in pr.refined]
 
 
 def _check(agreeing: int, missing: int):
@@ -214,23 +219,31 @@ def _check(agreeing: int, missing: int):
     return Check(share, share, share, agreeing + missing, agreeing, missing, 0, 0.0)
 
 
-def test_which_distinct_placement_is_a_rival():
+@pytest.mark.parametrize("calibration", [0.0, 3.0])
+def test_which_distinct_placement_is_a_rival(calibration):
     from fusionkit.methods.consensus._null import NullModel
     from fusionkit.methods.consensus._pair import is_rival
     # wrong placements meet a tenth of their walls; 20 cells a trial; 10^5 placements tested
-    null = NullModel(np.full(16, 0.1), np.full(16, 500.0), 0.1, 20.0, 1e5)
+    null = NullModel(np.full(16, 0.1), np.full(16, 500.0), 0.1, 20.0, 1e5, calibration)
+
+    def lg(agreeing, missing):
+        return null.log10_nfa(_check(agreeing, missing)) - calibration
+
     best = _check(1000, 0)                  # every wall meets: 10^-45
     # 71 % of a larger overlap: 10^-44, within a decade, but significantly fewer walls meet
-    assert null.log10_nfa(_check(1500, 600)) - null.log10_nfa(best) < 1.0
+    assert lg(1000, 0) == pytest.approx(-45.0) and lg(1500, 600) - lg(1000, 0) < 1.0
     assert not is_rival(null, best, _check(1500, 600), 0.01, 0.6)
     # 70 % of the evidence with about the same share: a rival however far apart in decades
-    assert null.log10_nfa(_check(700, 5)) - null.log10_nfa(best) > 10.0
+    assert lg(700, 5) - lg(1000, 0) > 10.0
     assert is_rival(null, best, _check(700, 5), 0.01, 0.6)
-    # a best that barely passes (10^-2.5) and a placement that fails within two decades of it
-    # (10^-1.2, with half its evidence): they stand or fall together
+    # a best at 10^-2.5 and a placement at 10^-1.2 with half its evidence and a share not
+    # significantly lower (60 % of few walls): nearly as sure, a rival
     barely = _check(150, 0)
-    assert null.log10_nfa(barely) < -2.0 < null.log10_nfa(_check(228, 152))
+    assert lg(150, 0) == pytest.approx(-2.5) and -1.3 < lg(228, 152) < -1.1
     assert is_rival(null, barely, _check(228, 152), 0.01, 0.6)
+    # as near in decades (10^-1.1) but 53 % of many more walls: significantly worse, no rival
+    assert -1.2 < lg(256, 224) < -1.0
+    assert not is_rival(null, barely, _check(256, 224), 0.01, 0.6)
 
 
 def test_a_merged_map_reports_how_far_its_walls_stay_from_the_others(intel_crop):

@@ -23,11 +23,10 @@ class ConsensusConfig:
         accepted when the number of false alarms of its evidence (the expected count of wrong
         placements, among all a search can end on, that would fit as well; judged against the
         evidence the same two maps reach at many wrong placements, :class:`NullModel`) is at
-        most this, and no distinct placement is nearly as good: one whose false alarms are at
-        most ``1 / max_false_merge`` times the best's (unless both pass and the best meets
-        walls significantly more often, at this risk), or one with at least ``rival`` times
-        its evidence whose share of meeting walls is not significantly lower. Its meaning does
-        not depend on the maps' cell size, extent or clutter.
+        most this, and no distinct placement is nearly as good: one whose share of meeting
+        walls is not significantly lower (at this risk) and whose false alarms are fewer than
+        ``1 / max_false_merge`` times the best's or whose evidence is at least ``rival`` times
+        the best's. Its meaning does not depend on the maps' cell size, extent or clutter.
     null_samples : int
         Wrong placements sampled (ICP from random starts) for the null distribution.
     null_wide_points : int

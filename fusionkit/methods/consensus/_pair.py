@@ -117,20 +117,20 @@ def is_rival(null: NullModel, best, other, risk: float, fraction: float) -> bool
     """Whether a distinct placement with check ``other`` is nearly as good as the best one
     (check ``best``), which then cannot be accepted alone.
 
-    It is when it is nearly as sure (its false alarms at most ``1 / risk`` times the best's),
-    unless both pass the test and the best meets walls significantly more often; or when, with
-    at least ``fraction`` times the best's evidence, it meets walls about as often (the two
-    shares not significantly apart at ``risk``, with the design effect). It need not pass the
-    test itself: fitting nearly as well elsewhere is enough to make the best unsure. Two
-    placements that both pass are told apart by their shares, not by how far beyond chance
-    each is: in rows of racks the truth and a wrong placement can both be 20 decades beyond
-    chance, the one meeting every wall and the other two thirds of them.
+    It is when its share of meeting walls is not significantly lower than the best's (a
+    one-sided test at ``risk``, with the design effect, :meth:`NullModel.distinguishable`) and
+    it is either nearly as sure (its false alarms fewer than ``1 / risk`` times the best's) or
+    carries at least ``fraction`` of the best's evidence. It need not pass the test itself:
+    fitting nearly as well elsewhere is enough to make the best unsure. A placement that meets
+    walls significantly less often is no rival, however near in decades: in rows of racks the
+    truth and a wrong placement can both be 20 decades beyond chance, the one meeting every
+    wall and the other two thirds of them. The calibration cancels in the difference of the
+    two counts, so the answer is the same at any calibration.
     """
-    lg_best, lg_other = null.log10_nfa(best), null.log10_nfa(other)
-    apart = null.distinguishable(best, other, risk)
-    sure = lg_other <= math.log10(risk)
-    return ((lg_other - lg_best < -math.log10(risk) and not (sure and apart))
-            or (other.evidence() >= fraction * best.evidence() and not apart))
+    if null.distinguishable(best, other, risk):
+        return False
+    return (null.log10_nfa(other) - null.log10_nfa(best) < -math.log10(risk)
+            or other.evidence() >= fraction * best.evidence())
 
 
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
