@@ -323,8 +323,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     others.sort(key=lambda c: -c.rank)
     rivals: list[Candidate] = []
     for c in others:
-        near = is_rival(null, best.check, c.check, eps, cfg.rival)
-        if c.rank > 0 and near and all(
+        if c.rank > 0 and is_rival(null, best.check, c.check, eps, cfg.rival) and all(
                 displacement(c.transform, r.transform, box) > distinct for r in rivals):
             rivals.append(c)
     plausible = [best] if significant else []
