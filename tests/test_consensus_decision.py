@@ -11,7 +11,7 @@ import pytest
 
 from fusionkit.methods.peers import crop_pair, placement_error
 from fusionkit.cli import main
-from fusionkit.methods.consensus import ConsensusConfig, estimate_pair
+from fusionkit.methods.consensus import ConsensusConfig, estimate_pair, prepare_maps
 from fusionkit.errors import InputError
 from fusionkit.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from fusionkit.mapio import load_map, save_map
@@ -211,6 +211,36 @@ def test_a_wrong_placement_far_beyond_chance_but_visibly_worse_is_no_rival():
             if math.log10(c.nfa) - math.log10(best.nfa) < 2.0 and c.check.score < 0.7
             and c.transform.error_to(best.transform)[0] > 10.0]
     assert near, [(c.nfa, c.check.score) for c in pr.refined]
+
+
+def test_a_map_bent_by_drift_is_not_its_own_rival():
+    """An exploration of the Georgia Tech lab with odometry drift and no loop closure: the map
+    is bent, and two placements a degree apart each line up one part of it, both within 0.15 m
+    and 1 degree of the truth. The far corners move more than ``distinct`` between them, most
+    walls do not: they are one placement, and the pair is merged, not refused as ambiguous."""
+    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
+    from fusionkit.methods.consensus._pair import corners
+    from fusionkit.methods.consensus._verify import displacement, typical_move
+    world = WorldSpec("gatech_ilab", path=str(REAL / "gatech_ilab.yaml"))
+    cfg = BenchConfig(modes=("explore",), robots=(2,), cases=1, drift=0.01, drift_theta=0.001,
+                      seed=3)
+    case = make_case(CaseSpec(0, world, "explore", 2, 423341614), cfg)
+    truth = case.truth[0].inverse @ case.truth[1]
+    est = estimate_pair(case.grids[0], case.grids[1], scans_a=case.scans[0],
+                        scans_b=case.scans[1], seed=1614)
+    pr = est.diagnostics["pair"]
+    assert est.accepted and not pr.ambiguous and pr.diagnostics["rivals"] == 0, pr.reason
+    d, r = est.transform.error_to(truth)
+    assert d < 0.2 and r < math.radians(1.0)
+    # the other fit: as sure as the best by far, a degree away, near the truth too
+    other = pr.refined[1]
+    assert other.nfa < 1e-100 and other.check.score > 0.9
+    assert other.transform.error_to(truth)[0] < 0.2
+    assert math.radians(0.5) < abs(other.transform.error_to(pr.best.transform)[1]) < math.radians(2)
+    distinct = ConsensusConfig().distinct_cells * case.grids[0].resolution
+    _, ib = prepare_maps(case.grids, case.scans)
+    assert displacement(other.transform, pr.best.transform, corners(ib)) > distinct
+    assert typical_move(other.transform, pr.best.transform, ib.refine_points) < distinct
 
 
 def _check(agreeing: int, missing: int):

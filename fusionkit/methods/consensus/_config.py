@@ -67,7 +67,10 @@ class ConsensusConfig:
         ``1 / rival`` times those must be confirmed by a loop.
     distinct_cells : float
         Two placements are distinct when some corner of the moving map's known area moves by
-        more than this many cells between them.
+        more than this many cells between them. Another placement can rival the best one only
+        when it also moves most of the moving map's walls (the median of their moves) that far:
+        one turned a degree about the overlap moves only the far corners so much (a map bent
+        by drift, aligned on one part or another), and is the same placement.
     rotation_peaks : int
         Wall-direction correlation peaks tried as rotations (each in two branches).
     translations : int

@@ -18,7 +18,7 @@ from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_can
 from ._null import NullModel, null_model
 from ._memo import pair_memo, points_key, refine_memo, verify_memo
 from ._verify import (DEFAULT_GATES, Check, Placements, _in_cells, displacement, refine_cloud,
-                      refine_icp, refine_pso, verify)
+                      refine_icp, refine_pso, typical_move, verify)
 
 __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "displacement"]
 
@@ -320,6 +320,10 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     significant = log_nfa <= math.log10(eps)
     others = [c for c in refined[1:] if displacement(c.transform, best.transform, box) > distinct]
     others += [Candidate(t, chk, "null", null.nfa(chk)) for t, chk in wrong]
+    # another placement moves most of B's walls by more than ``distinct``: one turned a degree
+    # about the overlap (a map bent by drift, aligned on one part of it or on another) moves
+    # only its far corners that much, and is the same placement
+    others = [c for c in others if typical_move(c.transform, best.transform, thin) > distinct]
     others.sort(key=lambda c: -c.rank)
     rivals: list[Candidate] = []
     for c in others:

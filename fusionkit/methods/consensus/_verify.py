@@ -34,7 +34,7 @@ from ...pso import PSOConfig, pso_minimize
 from ...transform import Transform2D
 from ._index import MapIndex
 
-__all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_cloud", "refine_pso", "Check",
+__all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_cloud", "refine_pso", "Check", "typical_move",
            "verify", "displacement", "DEFAULT_GATES"]
 
 #: Pairing distances (cells) of the ICP stages, each run until the motion settles.
@@ -484,3 +484,15 @@ def displacement(t1: Transform2D, t2: Transform2D, pts) -> float:
         if d > worst:   # max(worst, d), without the call
             worst = d
     return math.sqrt(worst)
+
+
+def typical_move(t1: Transform2D, t2: Transform2D, pts: np.ndarray) -> float:
+    """Median distance (m) between where ``t1`` and ``t2`` put the points ``pts`` (``(N, 2)``):
+    how far most of them move, where :func:`displacement` gives the farthest."""
+    if len(pts) == 0:
+        return 0.0
+    a = math.cos(t1.theta) - math.cos(t2.theta)
+    b = math.sin(t1.theta) - math.sin(t2.theta)
+    dx = a * pts[:, 0] - b * pts[:, 1] + (t1.x - t2.x)
+    dy = b * pts[:, 0] + a * pts[:, 1] + (t1.y - t2.y)
+    return float(np.median(np.hypot(dx, dy)))
