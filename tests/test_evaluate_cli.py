@@ -142,6 +142,62 @@ def test_report_json_in_the_same_directory(scene, capsys):
     assert res["reference"] == "robot_1"  # the first robot of truth.json
 
 
+def _with_a_group(root, world, report, est_23):
+    """The scene's merge as it is when robot_2 and robot_3 link to each other but not to
+    robot_1: both left out of merged.yaml, group 1's map merged.group1.yaml in robot_2's frame."""
+    ident = {"x": 0.0, "y": 0.0, "theta": 0.0}
+    member = {"merged": False, "confidence": 0.0, "transform": None, "group": 1,
+              "group_reference": "robot_2.yaml"}
+    rep = dict(report, group_outputs=["out/merged.group1.yaml"], maps=[
+        dict(report["maps"][0], group=0),
+        dict(member, input="robot_2.yaml", group_transform=ident),
+        dict(member, input="robot_3.yaml", confidence=0.97, group_transform=est_23.as_dict(digits=None)),
+    ])
+    (root / "out/merged.report.json").write_text(json.dumps(rep))
+    save_map(in_robot_frame(world, T2), root / "out/merged.group1.yaml")
+    return rep
+
+
+def test_a_groups_map_is_scored_in_the_frame_of_its_first_map(scene, capsys):
+    root, world, report = scene
+    true_23 = T2.inverse @ T3
+    est_23 = Transform2D(true_23.x, true_23.y + 0.05, true_23.theta)
+    _with_a_group(root, world, report, est_23)
+    group_map = root / "out/merged.group1.yaml"
+    code, out, err = run([group_map, "--truth", root / "truth.json", "--json"], capsys)
+    assert code == 0, err
+    res = json.loads(out)
+    # found through the main report's group_outputs, scored in robot_2's frame
+    assert res["report"] == str(root / "out/merged.report.json")
+    assert res["group"] == 1 and res["reference"] == "robot_2"
+    assert res["metrics"] == evaluate_map(load_map(group_map), world, T2).as_dict()
+    assert res["metrics"]["completeness"] == 100.0 and res["metrics"]["accuracy"] == 100.0
+    rows = {r["robot"]: r for r in res["maps"]}
+    assert set(rows) == {"robot_2", "robot_3"} and all(r["merged"] for r in rows.values())
+    assert rows["robot_2"]["error"]["translation_m"] == pytest.approx(0.0, abs=1e-9)
+    assert rows["robot_3"]["error"]["translation_m"] == pytest.approx(0.05, abs=1e-6)
+    assert rows["robot_3"]["true_transform"] == pytest.approx(true_23.as_dict(digits=None))
+    # the table says whose frame it is
+    code, out, _ = run([group_map, "--truth", root / "truth.json"], capsys)
+    assert code == 0 and "group 1 of the report" in out and "in the frame of robot_2" in out
+    # the main map: the group's maps are listed as left out of it
+    code, out, _ = run([root / "out/merged.yaml", "--truth", root / "truth.json", "--json"], capsys)
+    res = json.loads(out)
+    assert code == 0 and res["group"] is None and res["reference"] == "robot_1"
+    assert [r["merged"] for r in res["maps"]] == [True, False, False]
+
+
+def test_a_report_that_lists_a_groups_map_without_its_maps_is_refused(scene, capsys):
+    root, world, report = scene
+    rep = _with_a_group(root, world, report, Transform2D(0.0, 0.0, 0.0))
+    for m in rep["maps"]:
+        m.pop("group", None)
+    (root / "out/merged.report.json").write_text(json.dumps(rep))
+    code, out, err = run([root / "out/merged.group1.yaml", "--truth", root / "truth.json"], capsys)
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert "group 1" in err and "Traceback" not in err
+
+
 def test_explicit_report_and_reference_without_report(scene, capsys):
     root, world, _ = scene
     rep = root / "elsewhere.json"

@@ -4,7 +4,10 @@ The merged map is in the frame of the merge's reference map; truth.json gives ev
 transform into the world map's frame (docs/formats.md has both formats), so the merged
 map is placed in the world frame by the reference robot's transform and scored with the
 metrics of docs/formats.md. With the merge report, each map's
-estimated transform is also compared with the true one, ``inv(T_ref) @ T_k``.
+estimated transform is also compared with the true one, ``inv(T_ref) @ T_k``. The fused map of
+a group of maps not linked to the reference (``NAME.groupK.yaml``, listed in the report under
+``group_outputs``) is scored the same way in the frame of the group's first map, with its
+maps' ``group_transform``.
 """
 
 from __future__ import annotations
@@ -33,7 +36,10 @@ def register(sub) -> None:
                     "matched to truth.json's robots by path (robot NAME is the NAME.yaml beside "
                     "truth.json), so a map of another run is refused, not scored against this "
                     "one. Formats and metrics: docs/formats.md. Exit status: 0 done, 2 bad input.")
-    p.add_argument("merged", metavar="MERGED.yaml", help="the merged map (map_server YAML)")
+    p.add_argument("merged", metavar="MERGED.yaml",
+                   help="the merged map (map_server YAML), or the map of a group of maps not "
+                        "linked to the reference that the merge wrote beside it "
+                        "(NAME.groupK.yaml), scored in the frame of the group's first map")
     p.add_argument("--truth", required=True, metavar="truth.json",
                    help="ground truth written by 'fusionkit simulate': the world map (its path "
                         "relative to truth.json's directory, else to the current directory) and "
@@ -41,7 +47,9 @@ def register(sub) -> None:
     p.add_argument("--report", metavar="REPORT.json",
                    help="the merge report that made MERGED.yaml (default: MERGED.report.json "
                         "beside it, else report.json beside it when its 'output' names "
-                        "MERGED.yaml; without one, only the map metrics are printed)")
+                        "MERGED.yaml; for a group's map NAME.groupK.yaml, also NAME.report.json "
+                        "beside it when it lists that map under 'group_outputs'; without one, "
+                        "only the map metrics are printed)")
     p.add_argument("--reference", metavar="NAME",
                    help="robot name in truth.json whose map frame the merged map is in, used "
                         "when there is no report (default: the first robot in truth.json); "
@@ -131,20 +139,39 @@ def _names_merged(report: dict, merged: Path) -> bool:
     return not isinstance(out, str) or Path(out).name == merged.name
 
 
+def _group_of(report: dict, merged: Path) -> int | None:
+    """The group (1, 2, ...) whose fused map ``merged`` is, by the file names the report lists
+    under ``group_outputs`` (``NAME.group1.yaml``, ...); None when it lists no such map."""
+    outs = report.get("group_outputs")
+    if not isinstance(outs, list):
+        return None
+    for k, g in enumerate(outs, start=1):
+        if isinstance(g, str) and Path(g).name == merged.name:
+            return k
+    return None
+
+
 def find_report(merged, report=None) -> Path | None:
     """The merge report for ``merged``: ``report`` when given, else ``<stem>.report.json``
     beside it, else ``report.json`` beside it, each only when its ``output`` names ``merged``
-    (same file name); ``None`` when there is none."""
+    (same file name); for a group's map ``NAME.groupK.yaml``, also ``NAME.report.json`` beside
+    it when it lists that map under ``group_outputs``; ``None`` when there is none."""
     merged = Path(merged)
     if report is not None:
         return Path(report)
-    for cand in (merged.with_name(merged.stem + ".report.json"), merged.with_name("report.json")):
+    cands = [merged.with_name(merged.stem + ".report.json"), merged.with_name("report.json")]
+    base, dot, tail = merged.stem.rpartition(".")
+    if dot and tail.startswith("group") and tail[5:].isdigit():
+        cands.insert(1, merged.with_name(base + ".report.json"))
+    for cand in cands:
         if cand.is_file():
             try:
                 doc = read_json(cand, "merge report")
             except InputError:
                 continue
-            if isinstance(doc, dict) and isinstance(doc.get("output"), str) and _names_merged(doc, merged):
+            if isinstance(doc, dict) and (
+                    (isinstance(doc.get("output"), str) and _names_merged(doc, merged))
+                    or _group_of(doc, merged) is not None):
                 return cand
     return None
 
@@ -196,11 +223,23 @@ def robot_of(truth: Truth, path_text: str, *, bases=(), others=()) -> str:
     return name
 
 
+def _transform(path: Path, m: dict, key: str) -> Transform2D | None:
+    t = m.get(key)
+    try:
+        return None if t is None else Transform2D.from_dict(t)
+    except ValueError:
+        raise InputError(f"{path}: map {show(m['input'])} has a {key.replace('_', ' ')} without "
+                         f"numeric x, y, theta: {show(t)}") from None
+
+
 def read_report(path, merged) -> dict:
     """Read and check a merge report (docs/formats.md) that made ``merged``.
 
     Returns the report with ``maps`` entries checked: ``input`` (str), ``merged`` (bool),
-    ``confidence`` (number or None), ``transform`` (:class:`Transform2D` or None).
+    ``confidence`` (number or None), ``transform`` (:class:`Transform2D` or None). When
+    ``merged`` is the fused map of group K of the report (``group_outputs``), ``group`` is K,
+    ``reference`` the group's first map and ``maps`` the group's maps, each with its
+    ``group_transform`` as ``transform`` (into that map's frame, the group map's frame).
     """
     path, merged = Path(path), Path(merged)
     doc = _read_json(path, "merge report")
@@ -208,24 +247,36 @@ def read_report(path, merged) -> dict:
             or not isinstance(doc.get("maps"), list):
         raise InputError(f"{path}: not a merge report (it needs 'reference' and 'maps'); give the "
                          f"report 'fusionkit merge' wrote")
-    if not _names_merged(doc, merged):
+    group = _group_of(doc, merged)
+    if group is None and not _names_merged(doc, merged):
         raise InputError(f"{path}: this report is for {show(doc['output'])}, not {merged}; give the "
                          f"report of this merged map with --report")
-    maps = []
     for i, m in enumerate(doc["maps"]):
         if not isinstance(m, dict) or not isinstance(m.get("input"), str):
             raise InputError(f"{path}: map entry {i + 1} has no 'input' path")
-        t = m.get("transform")
-        try:
-            t = None if t is None else Transform2D.from_dict(t)
-        except ValueError:
-            raise InputError(f"{path}: map {show(m['input'])} has a transform without numeric x, y, "
-                             f"theta: {show(m.get('transform'))}") from None
-        conf = m.get("confidence")
-        conf = float(conf) if isinstance(conf, (int, float)) and not isinstance(conf, bool) else None
+    if group is not None:
+        members = [m for m in doc["maps"] if m.get("group") == group]
+        if not members or not isinstance(members[0].get("group_reference"), str):
+            raise InputError(f"{path}: lists {merged.name} as the map of group {group} but no map "
+                             f"of that group with its 'group_reference'; give the report "
+                             f"'fusionkit merge' wrote")
+        maps = []
+        for m in members:
+            t = _transform(path, m, "group_transform")
+            maps.append({"input": m["input"], "merged": t is not None,
+                         "confidence": _confidence(m), "transform": t})
+        return {**doc, "reference": members[0]["group_reference"], "maps": maps, "group": group}
+    maps = []
+    for m in doc["maps"]:
+        t = _transform(path, m, "transform")
         maps.append({"input": m["input"], "merged": bool(m.get("merged", t is not None)) and t is not None,
-                     "confidence": conf, "transform": t})
-    return {**doc, "maps": maps}
+                     "confidence": _confidence(m), "transform": t})
+    return {**doc, "maps": maps, "group": None}
+
+
+def _confidence(m: dict) -> float | None:
+    conf = m.get("confidence")
+    return float(conf) if isinstance(conf, (int, float)) and not isinstance(conf, bool) else None
 
 
 # -- evaluation ----------------------------------------------------------------------------------
@@ -236,7 +287,8 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
     -------
     dict
         ``merged``, ``truth``, ``world``, ``report`` (path or None), ``reference`` (robot
-        name), ``metrics`` (:meth:`MapMetrics.as_dict`) and ``maps`` (per map of the report:
+        name), ``group`` (K for a group's map, else None), ``metrics``
+        (:meth:`MapMetrics.as_dict`) and ``maps`` (per map of the report, or of the group:
         ``input``, ``robot``, ``merged``, ``confidence``, ``transform`` and ``true_transform``
         as ``{x, y, theta}`` into the merged frame, and ``error`` in m, cells and degrees).
     """
@@ -287,6 +339,7 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
     return {
         "merged": str(merged), "truth": str(truth_info.path), "world": str(truth_info.world),
         "report": str(report_path) if report_path is not None else None, "reference": ref,
+        "group": rep["group"] if rep is not None else None,
         "metrics": metrics.as_dict(), "maps": rows,
     }
 
@@ -309,7 +362,10 @@ def format_evaluation(result: dict) -> str:
     if result["report"] is None:
         lines += ["", "no merge report found: give --report for per-map transform errors"]
         return "\n".join(lines)
-    lines += ["", f"per map (report {result['report']}); transforms into the merged frame:",
+    where = (f"group {result['group']} of the report {result['report']}; transforms into that "
+             f"group's map" if result.get("group") else
+             f"report {result['report']}; transforms into the merged frame")
+    lines += ["", f"per map ({where}):",
               f"  {'map':<24} {'merged':<6} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'th (deg)':>8}"
               f" {'true x':>8} {'true y':>8} {'true th':>8} {'err (m)':>8} {'cells':>6} {'deg':>6}"]
     labels = [clip_left(r["input"], 24) for r in result["maps"]]
