@@ -187,15 +187,62 @@ def test_a_groups_map_is_scored_in_the_frame_of_its_first_map(scene, capsys):
     assert [r["merged"] for r in res["maps"]] == [True, False, False]
 
 
-def test_a_report_that_lists_a_groups_map_without_its_maps_is_refused(scene, capsys):
+def _broken_group_reports():
+    """Reports that list merged.group1.yaml but do not say whose frame it is in."""
+    def no_members(rep):
+        for m in rep["maps"]:
+            m.pop("group", None)
+
+    def true_is_no_group(rep):
+        for m in rep["maps"][1:]:
+            m["group"] = True
+
+    def reference_outside_the_group(rep):
+        for m in rep["maps"][1:]:
+            m["group_reference"] = "robot_1.yaml"
+
+    def two_references(rep):
+        rep["maps"][2]["group_reference"] = "robot_3.yaml"
+
+    return [no_members, true_is_no_group, reference_outside_the_group, two_references]
+
+
+@pytest.mark.parametrize("spoil", _broken_group_reports(), ids=lambda f: f.__name__)
+def test_a_report_that_lists_a_groups_map_without_its_maps_is_refused(scene, capsys, spoil):
     root, world, report = scene
     rep = _with_a_group(root, world, report, Transform2D(0.0, 0.0, 0.0))
-    for m in rep["maps"]:
-        m.pop("group", None)
+    spoil(rep)
     (root / "out/merged.report.json").write_text(json.dumps(rep))
     code, out, err = run([root / "out/merged.group1.yaml", "--truth", root / "truth.json"], capsys)
     assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
     assert "group 1" in err and "Traceback" not in err
+
+
+def test_a_groups_map_without_its_report_needs_a_reference(scene, capsys):
+    root, world, report = scene
+    rep = _with_a_group(root, world, report, Transform2D(0.0, 0.0, 0.0))
+    (root / "out/merged.report.json").unlink()
+    group_map = root / "out/merged.group1.yaml"
+    code, out, err = run([group_map, "--truth", root / "truth.json"], capsys)
+    assert code == 2 and out == "" and len(err.strip().splitlines()) == 1
+    assert "--reference" in err and "--report" in err
+    # the same when the report beside it does not list it
+    rep["group_outputs"] = []
+    (root / "out/merged.report.json").write_text(json.dumps(rep))
+    code, out, err = run([group_map, "--truth", root / "truth.json"], capsys)
+    assert code == 2 and "group_outputs" in err
+    # with the robot whose frame it is in, it is scored in that frame
+    code, out, err = run([group_map, "--truth", root / "truth.json", "--reference", "robot_2",
+                          "--json"], capsys)
+    res = json.loads(out)
+    assert code == 0 and res["reference"] == "robot_2" and res["group"] is None
+    assert res["metrics"]["accuracy"] == 100.0
+    # --reference that disagrees with the group's frame names the group
+    rep["group_outputs"] = ["out/merged.group1.yaml"]
+    (root / "out/merged.report.json").write_text(json.dumps(rep))
+    code, out, err = run([group_map, "--truth", root / "truth.json", "--reference", "robot_1"],
+                         capsys)
+    assert code == 2 and "group 1" in err and "robot_2.yaml" in err
 
 
 def test_explicit_report_and_reference_without_report(scene, capsys):

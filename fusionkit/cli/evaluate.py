@@ -46,14 +46,15 @@ def register(sub) -> None:
                         "each robot's transform into the world frame")
     p.add_argument("--report", metavar="REPORT.json",
                    help="the merge report that made MERGED.yaml (default: MERGED.report.json "
-                        "beside it, else report.json beside it when its 'output' names "
-                        "MERGED.yaml; for a group's map NAME.groupK.yaml, also NAME.report.json "
-                        "beside it when it lists that map under 'group_outputs'; without one, "
-                        "only the map metrics are printed)")
+                        "beside it, else, for a group's map NAME.groupK.yaml, NAME.report.json, "
+                        "else report.json beside it, when its 'output' names MERGED.yaml or it "
+                        "lists it under 'group_outputs'; without one, only the map metrics are "
+                        "printed, and a group's map needs --reference)")
     p.add_argument("--reference", metavar="NAME",
                    help="robot name in truth.json whose map frame the merged map is in, used "
                         "when there is no report (default: the first robot in truth.json); "
-                        "with a report it must agree with the report's reference")
+                        "with a report it must agree with the report's reference (for a "
+                        "group's map, the group's first map)")
     p.add_argument("--json", action="store_true",
                    help='print one JSON object {"metrics": {...}, "maps": [...], ...} instead '
                         "of tables")
@@ -139,6 +140,14 @@ def _names_merged(report: dict, merged: Path) -> bool:
     return not isinstance(out, str) or Path(out).name == merged.name
 
 
+def _group_number(merged: Path) -> int | None:
+    """K when ``merged`` is named like the map of group K of a merge (``NAME.groupK.yaml``)."""
+    base, dot, tail = merged.stem.rpartition(".")
+    if dot and base and tail.startswith("group") and tail[5:].isdigit():
+        return int(tail[5:])
+    return None
+
+
 def _group_of(report: dict, merged: Path) -> int | None:
     """The group (1, 2, ...) whose fused map ``merged`` is, by the file names the report lists
     under ``group_outputs`` (``NAME.group1.yaml``, ...); None when it lists no such map."""
@@ -153,16 +162,15 @@ def _group_of(report: dict, merged: Path) -> int | None:
 
 def find_report(merged, report=None) -> Path | None:
     """The merge report for ``merged``: ``report`` when given, else ``<stem>.report.json``
-    beside it, else ``report.json`` beside it, each only when its ``output`` names ``merged``
-    (same file name); for a group's map ``NAME.groupK.yaml``, also ``NAME.report.json`` beside
-    it when it lists that map under ``group_outputs``; ``None`` when there is none."""
+    beside it, else (for a group's map ``NAME.groupK.yaml``) ``NAME.report.json``, else
+    ``report.json`` beside it, each only when its ``output`` names ``merged`` (same file name)
+    or it lists ``merged`` under ``group_outputs``; ``None`` when there is none."""
     merged = Path(merged)
     if report is not None:
         return Path(report)
     cands = [merged.with_name(merged.stem + ".report.json"), merged.with_name("report.json")]
-    base, dot, tail = merged.stem.rpartition(".")
-    if dot and tail.startswith("group") and tail[5:].isdigit():
-        cands.insert(1, merged.with_name(base + ".report.json"))
+    if _group_number(merged) is not None:
+        cands.insert(1, merged.with_name(merged.stem.rpartition(".")[0] + ".report.json"))
     for cand in cands:
         if cand.is_file():
             try:
@@ -255,11 +263,14 @@ def read_report(path, merged) -> dict:
         if not isinstance(m, dict) or not isinstance(m.get("input"), str):
             raise InputError(f"{path}: map entry {i + 1} has no 'input' path")
     if group is not None:
-        members = [m for m in doc["maps"] if m.get("group") == group]
-        if not members or not isinstance(members[0].get("group_reference"), str):
-            raise InputError(f"{path}: lists {merged.name} as the map of group {group} but no map "
-                             f"of that group with its 'group_reference'; give the report "
-                             f"'fusionkit merge' wrote")
+        members = [m for m in doc["maps"] if isinstance(m.get("group"), int)
+                   and not isinstance(m.get("group"), bool) and m["group"] == group]
+        refs = {m.get("group_reference") for m in members}
+        if not members or len(refs) != 1 or not isinstance(members[0].get("group_reference"), str) \
+                or members[0]["group_reference"] not in {m["input"] for m in members}:
+            raise InputError(f"{path}: lists {merged.name} as the map of group {group} but not the "
+                             f"maps of that group with one 'group_reference' among them; give the "
+                             f"report 'fusionkit merge' wrote")
         maps = []
         for m in members:
             t = _transform(path, m, "group_transform")
@@ -289,8 +300,9 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
         ``merged``, ``truth``, ``world``, ``report`` (path or None), ``reference`` (robot
         name), ``group`` (K for a group's map, else None), ``metrics``
         (:meth:`MapMetrics.as_dict`) and ``maps`` (per map of the report, or of the group:
-        ``input``, ``robot``, ``merged``, ``confidence``, ``transform`` and ``true_transform``
-        as ``{x, y, theta}`` into the merged frame, and ``error`` in m, cells and degrees).
+        ``input``, ``robot``, ``merged`` (in ``merged``: for a group's map, in the group's
+        map), ``confidence``, ``transform`` and ``true_transform`` as ``{x, y, theta}`` into
+        the frame of ``merged``, and ``error`` in m, cells and degrees).
     """
     from ..mapio import load_map
     from ..metrics import evaluate_map, transform_errors
@@ -309,9 +321,16 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
         except InputError as exc:
             raise InputError(f"{report_path}: the reference: {exc}") from None
         if reference is not None and reference != ref:
+            whose = (f"whose group {rep['group']} is in the frame of" if rep["group"]
+                     else "whose reference is")
             raise InputError(f"--reference {reference} disagrees with the report {report_path}, "
-                             f"whose reference is {rep['reference']} ({ref}); drop --reference")
+                             f"{whose} {rep['reference']} ({ref}); drop --reference")
     else:
+        if reference is None and _group_number(merged) is not None:
+            raise InputError(f"{merged} is named like the map of a group of a merge, but no merge "
+                             f"report beside it lists it under 'group_outputs', so its frame is "
+                             f"unknown; give the merge report with --report, or the robot whose "
+                             f"frame it is in with --reference")
         ref = reference if reference is not None else next(iter(robots))
         if ref not in robots:
             raise InputError(f"--reference {ref}: no such robot in {truth_info.path}; choose one of "
