@@ -77,3 +77,29 @@ def test_a_map_linked_to_nothing_has_no_group(two_buildings):
     result = merge([one.a, one.b, two.a], config=MergeConfig(method="consensus"))
     assert result.placements[2].group is None and not result.groups
     assert result.report(output="m.yaml")["group_outputs"] == []
+
+
+def test_a_pair_with_a_rival_confirms_no_loop(tmp_path, capsys):
+    """Five robots in the built-in office (rooms alike along a corridor), 60 poses each (seed
+    11). Robot 2's pairs with robots 3 and 4 fit best one room period (17 m) off: with 3 it is
+    ambiguous, with 4 not significant and with a rival. A loop through the pair with 4 used to
+    confirm the alias in the pair with 3, and robot 2 joined the group of 3, 4 and 5 17 m off.
+    A pair with a rival is no witness: every map of the group's map is now where it belongs, and
+    robot 2 is left out."""
+    from fusionkit.cli.evaluate import evaluate_files
+    run = tmp_path / "run"
+    assert main(["simulate", "--robots", "5", "--poses", "60", "--seed", "11", "--out", str(run),
+                 "--quiet"]) == 0
+    robots = [str(run / f"robot_{k}.yaml") for k in range(1, 6)]
+    out = tmp_path / "m.yaml"
+    assert main(["merge", *robots, "-o", str(out)]) == 3
+    capsys.readouterr()
+    rep = json.loads((tmp_path / "m.report.json").read_text())
+    assert rep["group_outputs"], rep
+    for m in [out, *map(Path, rep["group_outputs"])]:
+        res = evaluate_files(m, run / "truth.json")
+        for row in res["maps"]:
+            if row["merged"]:
+                assert row["error"]["translation_cells"] < 3, (m.name, row)
+    entries = {Path(e["input"]).name: e for e in rep["maps"]}
+    assert entries["robot_2.yaml"].get("group") is None

@@ -129,11 +129,14 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
              for p in pairs.values() if p.accepted}
     ambiguous = {(p.a, p.b): p.plausible for p in pairs.values() if p.ambiguous}
     # witnesses: pairs whose best placement is meaningful (fewer than one false alarm
-    # expected) without reaching the risk accepted; they never place a map, but they may break
-    # ties between loops
+    # expected, and no distinct placement nearly as good) without reaching the risk accepted;
+    # they never place a map, but they may break ties between loops. A pair with a rival is no
+    # witness: in rows of identical rooms its best placement may be one room off, and a loop
+    # through it would confirm the same room's alias in the pair it is meant to decide
     witness = {(p.a, p.b): (p.transform, p.confidence, p.best.rank)
                for p in pairs.values()
-               if not p.accepted and not p.ambiguous and p.best is not None and p.nfa <= 1.0}
+               if not p.accepted and not p.ambiguous and p.best is not None and p.nfa <= 1.0
+               and not p.diagnostics.get("rivals")}
     dropped: list = []
     resolved: list = []
 
