@@ -322,8 +322,10 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     others += [Candidate(t, chk, "null", null.nfa(chk)) for t, chk in wrong]
     # another placement moves most of B's walls by more than ``distinct``: one turned a degree
     # about the overlap (a map bent by drift, aligned on one part of it or on another) moves
-    # only its far corners that much, and is the same placement
-    others = [c for c in others if typical_move(c.transform, best.transform, thin) > distinct]
+    # only its far corners that much, and is the same placement. Only those the two loops below
+    # can use are measured: with evidence (a rival) or passing the test (plausible)
+    others = [c for c in others if (c.rank > 0 or c.nfa <= eps)
+              and typical_move(c.transform, best.transform, thin) > distinct]
     others.sort(key=lambda c: -c.rank)
     rivals: list[Candidate] = []
     for c in others:

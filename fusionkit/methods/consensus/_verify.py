@@ -34,8 +34,8 @@ from ...pso import PSOConfig, pso_minimize
 from ...transform import Transform2D
 from ._index import MapIndex
 
-__all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_cloud", "refine_pso", "Check", "typical_move",
-           "verify", "displacement", "DEFAULT_GATES"]
+__all__ = ["rigid_fit", "refine_icp", "refine_icp_numpy", "refine_cloud", "refine_pso", "Check",
+           "verify", "displacement", "typical_move", "DEFAULT_GATES"]
 
 #: Pairing distances (cells) of the ICP stages, each run until the motion settles.
 DEFAULT_GATES = (8.0, 5.0, 3.0, 2.0)
