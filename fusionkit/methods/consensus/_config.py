@@ -34,6 +34,13 @@ class ConsensusConfig:
         ``coarse_points``); 0, the default, to run every gate on ``coarse_points``. Fewer
         points end the wrong placements a little lower (on the leave-one-world-out pairs, one
         pair of two buildings gained 0.3 decades with 300), which shifts the calibration.
+    misfit_weight : float
+        A placement whose wall cells that meet the other map's walls are not more than this
+        many times those that miss (a cell on clear free space counting as three misses) is no
+        evidence at all. Two maps of one place meet nearly everywhere they overlap, even real
+        sessions (people, doors, clutter) or maps bent by drift, where the overlap is large;
+        a room laid on another room of a repetitive building misses at every door and shelf
+        that differs (BENCHMARKS.md: maps of one building that share no wall).
     calibration : float
         Decades added to the model's count of false alarms (:class:`NullModel`), chosen on
         pairs of maps of two different buildings, where every placement is wrong: the least
@@ -143,6 +150,7 @@ class ConsensusConfig:
     max_false_merge: float = 0.01
     null_samples: int = 64
     null_wide_points: int = 0
+    misfit_weight: float = 2.0
     calibration: float = 3.75
     wall_correlation: float = 1.5
     wall_correlation_max: float = 6.0
@@ -184,6 +192,10 @@ class ConsensusConfig:
             raise InputError(f"calibration is a finite number of decades, got {self.calibration!r}")
         if not 0.0 < self.rival <= 1.0:
             raise InputError(f"rival is a fraction in (0, 1], got {self.rival}")
+        v = self.misfit_weight
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                and v > 0):
+            raise InputError(f"misfit_weight must be a positive number, got {v!r}")
         for name in ("scan_clusters", "rotation_peaks", "translations", "refine_top", "max_poses",
                      "max_refine_points", "coarse_points", "pso_top", "alias_peaks", "coarse_side",
                      "threads", "null_samples", "fallback_rotations",

@@ -57,9 +57,9 @@ class NullModel:
     placement with probability at most ``exp(-(n / design) KL(f || p0))`` (Chernoff), and its
     number of false alarms is that times ``tests``, the number of distinct placements a search
     can end on (:func:`search_tests`): the expected count of wrong placements that would fit
-    as well, which the user bounds by ``max_false_merge``. A placement whose robust evidence
-    (:meth:`Check.evidence`) is not positive, the maps contradicting each other more than they
-    agree, is given no evidence at all. Neither depends on the cell size,
+    as well, which the user bounds by ``max_false_merge``. A placement whose wall cells that
+    meet are not more than ``misfit_weight`` times those that miss (counted as in ``trials``) is
+    given no evidence at all. Neither depends on the cell size,
     the extent or the clutter of the maps; all three enter through the maps' own wrong
     placements. ``calibration`` (decades) is added to that count's logarithm: an offset chosen
     on pairs of maps of different buildings (BENCHMARKS.md), negative when the count, an upper
@@ -72,6 +72,7 @@ class NullModel:
     design: float
     tests: float
     calibration: float = 0.0
+    misfit_weight: float = 1.0
 
     @property
     def usable(self) -> bool:
@@ -84,10 +85,13 @@ class NullModel:
             return math.inf
         k, n = _trials(chk)
         top = math.log10(self.tests) + self.calibration
-        if n <= 0 or chk.evidence() <= 0:
+        if n <= 0 or chk.agreeing - self.misfit_weight * (n - k) <= 0:
             # a placement under which the maps contradict each other more than they agree
-            # (its walls miss the other's or cross its open floor more often than they meet)
-            # is no evidence of being the same place, however rarely wrong placements do as well
+            # (its walls miss the other's or cross its open floor more often than
+            # ``misfit_weight`` times those that meet) is no evidence of being the same place,
+            # however rarely wrong placements do as well: two maps of one place meet nearly
+            # everywhere they overlap, while a room or rack row of a repetitive building laid
+            # on another misses at every door and shelf that differs
             return top
         f = k / n
         if f <= self.p0:
@@ -144,7 +148,7 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
                calibration: float = 0.0, correlation: float = 3.0,
                correlation_max: float | None = None, basin: float = 0.4, settled=None,
                batch: int = 16, least: int = 32, wide_points: int = 0,
-               seed=0) -> tuple[NullModel, list]:
+               misfit_weight: float = 1.0, seed=0) -> tuple[NullModel, list]:
     """Sample the evidence of wrong placements of B in A (see :class:`NullModel`).
 
     Parameters
@@ -224,14 +228,17 @@ def null_model(a: MapIndex, b: MapIndex, away_from: Transform2D, box: np.ndarray
             out.append((t, verify_memo(memo, a, b, t)))
             if (settled is not None and len(out) >= least and len(out) % batch == 0
                     and len(out) < samples):
-                model = _fit(out, a.resolution, tests, calibration, correlation, correlation_max)
+                model = _fit(out, a.resolution, tests, calibration, correlation, correlation_max,
+                             misfit_weight)
                 if model.usable and settled(model, out):
                     break
-    return _fit(out, a.resolution, tests, calibration, correlation, correlation_max), out
+    return _fit(out, a.resolution, tests, calibration, correlation, correlation_max,
+                misfit_weight), out
 
 
 def _fit(out: list, resolution: float, tests: float, calibration: float,
-         correlation: float, correlation_max: float | None = None) -> NullModel:
+         correlation: float, correlation_max: float | None = None,
+         misfit_weight: float = 1.0) -> NullModel:
     """The null model of the wrong placements ``out`` (``(Transform2D, Check)`` pairs)."""
     kn = np.array([_trials(chk) for _, chk in out], float).reshape(-1, 2)
     kn = kn[kn[:, 1] > 0]
@@ -252,4 +259,4 @@ def _fit(out: list, resolution: float, tests: float, calibration: float,
         design = max(design, 1.0)
     else:
         f, p0, design = np.zeros(0), 1.0, 1.0
-    return NullModel(f, kn[:, 1], p0, design, tests, calibration)
+    return NullModel(f, kn[:, 1], p0, design, tests, calibration, misfit_weight)

@@ -133,6 +133,12 @@ def is_rival(null: NullModel, best, other, risk: float, fraction: float) -> bool
             or other.evidence() >= fraction * best.evidence())
 
 
+def chk_misses(chk: Check) -> int:
+    """Wall cells of a check that miss the other map's walls, one on its clear free space
+    counted thrice (as the test counts them, :func:`~fusionkit.methods.consensus._null._trials`)."""
+    return chk.disagreeing + 2 * chk.conflicts
+
+
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
                      evidence_a: EvidenceRaster, ia: int = 0, ib: int = 1, seed=0,
                      exhaustive: bool = False, tree_a=None) -> PairResult:
@@ -309,7 +315,8 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                              correlation=cfg.wall_correlation,
                              correlation_max=cfg.wall_correlation_max,
                              basin=cfg.test_basin, settled=settled,
-                             wide_points=cfg.null_wide_points, seed=rng)
+                             wide_points=cfg.null_wide_points,
+                             misfit_weight=cfg.misfit_weight, seed=rng)
 
     def judged(c: Candidate) -> Candidate:
         return Candidate(c.transform, c.check, c.source, null.nfa(c.check))
@@ -328,8 +335,11 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
               and typical_move(c.transform, best.transform, thin) > distinct]
     others.sort(key=lambda c: -c.rank)
     rivals: list[Candidate] = []
+    # a rival is judged by its share of meeting walls alone: one that misses too much to be
+    # evidence of itself still shows that the maps fit elsewhere nearly as well
+    shares = replace(null, misfit_weight=1.0)
     for c in others:
-        if c.rank > 0 and is_rival(null, best.check, c.check, eps, cfg.rival) and all(
+        if c.rank > 0 and is_rival(shares, best.check, c.check, eps, cfg.rival) and all(
                 displacement(c.transform, r.transform, box) > distinct for r in rivals):
             rivals.append(c)
     plausible = [best] if significant else []
@@ -353,6 +363,13 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         reason = (f"best placement is contradicted: {100 * chk.score:.0f}% of the walls meet, but "
                   f"{chk.disagreeing} wall cells miss the other map's walls and {chk.conflicts} of "
                   f"them cross its open floor, more than the {chk.agreeing} that meet")
+    elif null.usable and chk_misses(best.check) * cfg.misfit_weight >= best.check.agreeing:
+        chk = best.check
+        reason = (f"best placement misses too much: {100 * chk.score:.0f}% of the walls meet, but "
+                  f"{chk.disagreeing} wall cells miss the other map's walls ({chk.conflicts} of them "
+                  f"on its open floor, counted thrice) against {chk.agreeing} that meet; two maps of "
+                  f"one place meet more than {cfg.misfit_weight:g} times as often where they overlap "
+                  f"(maps of a building of identical rooms that share no wall do not)")
     elif not null.usable:
         reason = ("nothing to judge a placement by: too few walls overlap at any placement to tell "
                   "a right one from a wrong one")
