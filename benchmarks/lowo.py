@@ -71,6 +71,7 @@ each kind, K = 2, no ``apart`` runs, spectral-pso left out: 40 pairs in about 80
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import math
 import statistics
@@ -169,6 +170,28 @@ def log_pairs(logs_dir: Path, splits, seed: int, tmp: Path, skipped: list) -> li
     return out
 
 
+def _apart_runs(real, runs: int, drift):
+    """Every simulated run of :func:`apart_pairs`: ``(world, name, grid, robots, poses, drift,
+    key, run)``, each world's grid loaded or generated once."""
+    from fusionkit.bench.cases import load_world
+    from fusionkit.worlds import make_world
+    still = (0.0, 0.0)
+    for wi, w in enumerate(real):
+        g = load_world(w)
+        for n in range(runs):
+            for d in (still, drift):
+                yield building(w.name), w.name, g, 6, 60, d, (wi, n, d != still), n
+    for ki, kind in enumerate(("office", "warehouse")):
+        for layout in range(4):
+            for si, size in enumerate(((40.0, 30.0), (60.0, 40.0))):
+                g = make_world(kind, layout, size, 0.1)
+                name = f"{kind} layout {layout} {size[0]:g}x{size[1]:g} m"
+                for poses in (60, 120):
+                    for n in range(runs):
+                        for d in (still, drift):
+                            yield kind, name, g, 5, poses, d, (1000 + ki, layout, si, poses, n, d != still), n
+
+
 def apart_pairs(real, runs: int, seed: int, fam_id: int, drift=(0.01, 0.001)) -> list[dict]:
     """Negatives within one building: maps of robots of one simulated run that never met (their
     known areas share at most 2 % of the smaller one). Six robots, 60 poses each, explore every
@@ -176,41 +199,25 @@ def apart_pairs(real, runs: int, seed: int, fam_id: int, drift=(0.01, 0.001)) ->
     worlds (``office``, ``warehouse``, layouts 0-3, 40 x 30 m and 60 x 40 m) are explored by five
     robots with 60 and 120 poses, ``runs`` times each way. Every placement of such a pair is
     wrong (they share no wall to be placed by); their world is the building, left out with it."""
-    from fusionkit.bench.cases import _overlaps, load_world
+    from fusionkit.bench.cases import _overlaps
     from fusionkit.resample import resample
     from fusionkit.simulate import MotionConfig, SimulationConfig, simulate
-    from fusionkit.worlds import make_world
-    jobs = []
-    for wi, w in enumerate(real):
-        for n in range(runs):
-            for d in ((0.0, 0.0), drift):
-                jobs.append((building(w.name), w.name, lambda w=w: load_world(w), 6, 60, d, (wi, n, d != (0.0, 0.0))))
-    for ki, kind in enumerate(("office", "warehouse")):
-        for layout in range(4):
-            for si, size in enumerate(((40.0, 30.0), (60.0, 40.0))):
-                for poses in (60, 120):
-                    for n in range(runs):
-                        for d in ((0.0, 0.0), drift):
-                            name = f"{kind} layout {layout} {size[0]:g}x{size[1]:g} m"
-                            jobs.append((kind, name, lambda k=kind, l=layout, z=size: make_world(k, l, z, 0.1),
-                                         5, poses, d, (1000 + ki, layout, si, poses, n, d != (0.0, 0.0))))
     out = []
-    for world, name, load, robots, poses, d, key in jobs:
-        g = load()
+    for world, name, g, robots, poses, d, key, run in _apart_runs(real, runs, drift):
         s = _seed(seed, fam_id, *[int(k) for k in key])
         sim = simulate(g, SimulationConfig(robots=robots, poses=poses, seed=s,
                                            motion=MotionConfig(drift_xy=d[0], drift_theta=d[1])))
-        masks = [resample(r.grid, r.transform, g).known_mask() & g.known_mask() for r in sim.robots]
-        ov = _overlaps(masks)
-        for i in range(robots):
-            for j in range(i + 1, robots):
-                a, b = sim.robots[i], sim.robots[j]
-                if ov[i, j] > 0.02 or min(int(a.grid.occupied_mask().sum()), int(b.grid.occupied_mask().sum())) < 50:
-                    continue
-                out.append({"family": "apart", "world": world, "other": world,
-                            "source": f"{name} {poses} poses{' drift' if d[0] else ''} run {key[-2] if len(key) > 3 else key[1]} {i + 1}-{j + 1}",
-                            "mode": "explore", "case_seed": _seed(s, i, j), "a": a.grid, "b": b.grid,
-                            "scans_a": a.scans, "scans_b": b.scans, "truth": None})
+        ov = _overlaps([resample(r.grid, r.transform, g).known_mask() & g.known_mask()
+                        for r in sim.robots])
+        walls = [int(r.grid.occupied_mask().sum()) for r in sim.robots]
+        for i, j in itertools.combinations(range(robots), 2):
+            if ov[i, j] > 0.02 or min(walls[i], walls[j]) < 50:
+                continue
+            a, b = sim.robots[i], sim.robots[j]
+            out.append({"family": "apart", "world": world, "other": world,
+                        "source": f"{name} {poses} poses{' drift' if d[0] else ''} run {run} {i + 1}-{j + 1}",
+                        "mode": "explore", "case_seed": _seed(s, i, j), "a": a.grid, "b": b.grid,
+                        "scans_a": a.scans, "scans_b": b.scans, "truth": None})
     return out
 
 
@@ -366,6 +373,12 @@ def lowo(records: list[dict], eps: float, rivals: bool = True, margin: float = M
     return {"offsets": offsets, "in_sample": choose_offset(negs, eps, rivals, margin)}
 
 
+def _judgements(negs: list[dict]) -> list[tuple]:
+    """``(negative, world left out)``: a negative once per world of it (once when both maps show
+    one building)."""
+    return [(r, w) for r in negs for w in dict.fromkeys((r["world"], r["other"]))]
+
+
 def _count(outcomes) -> tuple[int, int, int]:
     outcomes = list(outcomes)
     return (sum(o == "right" for o in outcomes), sum(o == "wrong" for o in outcomes),
@@ -424,8 +437,8 @@ def tables(data: dict) -> str:
                              f"largest {max(x[0] for x in e):.1f} cells and {max(x[1] for x in e):.1f} deg"
                              for f, e in errs.items()))
     lines.append("")
-    # negatives: each is judged once with each of its two worlds left out
-    jud = [(r, w) for r in negs for w in dict.fromkeys((r["world"], r["other"]))]
+    # negatives: each is judged once with each of its worlds left out
+    jud = _judgements(negs)
     passing = [(r, w) for r, w in jud if merged(r, offs[w], eps)]
     lines.append("Negatives (pairs of two worlds, or, in `apart`, of one building that share no wall; "
                  "each judged once with each of its worlds left out):")
@@ -437,7 +450,7 @@ def tables(data: dict) -> str:
         rs = negs if f == "**all**" else [r for r in negs if r["family"] == f]
         if not rs:
             continue
-        j = [(r, w) for r in rs for w in dict.fromkeys((r["world"], r["other"]))]
+        j = _judgements(rs)
         cells = [f"{sum(merged(r, offs[w], eps) for r, w in j)} / {len(j)}",
                  f"{sum(merged(r, ins, eps) for r in rs)} / {len(rs)}",
                  f"{sum(merged(r, default, eps) for r in rs)} / {len(rs)}"]

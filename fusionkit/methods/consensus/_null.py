@@ -85,18 +85,21 @@ class NullModel:
             return math.inf
         k, n = _trials(chk)
         top = math.log10(self.tests) + self.calibration
-        if n <= 0 or chk.agreeing - self.misfit_weight * (n - k) <= 0:
-            # a placement under which the maps contradict each other more than they agree
-            # (its walls miss the other's or cross its open floor more often than
-            # ``misfit_weight`` times those that meet) is no evidence of being the same place,
-            # however rarely wrong placements do as well: two maps of one place meet nearly
-            # everywhere they overlap, while a room or rack row of a repetitive building laid
-            # on another misses at every door and shelf that differs
+        if n <= 0 or self.misses_too_much(chk):
             return top
         f = k / n
         if f <= self.p0:
             return top
         return top - (n / self.design) * _kl(f, self.p0) / math.log(10.0)
+
+    def misses_too_much(self, chk) -> bool:
+        """Whether the wall cells of check ``chk`` that meet the other map's walls are not more
+        than ``misfit_weight`` times those that miss (counted as in ``trials``). Such a placement
+        is no evidence of being the same place, however rarely wrong placements do as well: two
+        maps of one place meet nearly everywhere they overlap, while a room or rack row of a
+        repetitive building laid on another misses at every door and shelf that differs."""
+        k, n = _trials(chk)
+        return k - self.misfit_weight * (n - k) <= 0
 
     def nfa(self, chk) -> float:
         """Number of false alarms of a placement with check ``chk``."""

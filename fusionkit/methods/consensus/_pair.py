@@ -133,12 +133,6 @@ def is_rival(null: NullModel, best, other, risk: float, fraction: float) -> bool
             or other.evidence() >= fraction * best.evidence())
 
 
-def chk_misses(chk: Check) -> int:
-    """Wall cells of a check that miss the other map's walls, one on its clear free space
-    counted thrice (as the test counts them, :func:`~fusionkit.methods.consensus._null._trials`)."""
-    return chk.disagreeing + 2 * chk.conflicts
-
-
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
                      evidence_a: EvidenceRaster, ia: int = 0, ib: int = 1, seed=0,
                      exhaustive: bool = False, tree_a=None) -> PairResult:
@@ -363,12 +357,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         reason = (f"best placement is contradicted: {100 * chk.score:.0f}% of the walls meet, but "
                   f"{chk.disagreeing} wall cells miss the other map's walls and {chk.conflicts} of "
                   f"them cross its open floor, more than the {chk.agreeing} that meet")
-    elif null.usable and chk_misses(best.check) * cfg.misfit_weight >= best.check.agreeing:
+    elif null.usable and null.misses_too_much(best.check):
         chk = best.check
         reason = (f"best placement misses too much: {100 * chk.score:.0f}% of the walls meet, but "
                   f"{chk.disagreeing} wall cells miss the other map's walls ({chk.conflicts} of them "
                   f"on its open floor, counted thrice) against {chk.agreeing} that meet; two maps of "
-                  f"one place meet more than {cfg.misfit_weight:g} times as often where they overlap "
+                  f"one place meet more than {null.misfit_weight:g} times as often where they overlap "
                   f"(maps of a building of identical rooms that share no wall do not)")
     elif not null.usable:
         reason = ("nothing to judge a placement by: too few walls overlap at any placement to tell "
