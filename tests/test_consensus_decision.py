@@ -462,6 +462,12 @@ def test_maps_of_one_building_that_share_no_wall_are_not_merged(tmp_path):
     assert pr.best is not None and pr.best.check.score > 0.75
     assert pr.best.transform.error_to(t[0].inverse @ t[4])[0] > 10.0    # one room on another
     assert not est.accepted and "misses too much" in pr.reason, pr.reason
+    # the reason gives the counts the rule is taken on, so that a user can check it
+    chk = pr.best.check
+    misses = chk.disagreeing + 2 * chk.conflicts
+    assert (f"{chk.agreeing} wall cells meet" in pr.reason and f"{chk.disagreeing} miss them" in pr.reason
+            and f"{misses} misses" in pr.reason), pr.reason
+    assert chk.agreeing <= 2 * misses
     out = tmp_path / "m.yaml"
     main(["merge", *[str(run / f"robot_{k}.yaml") for k in range(1, 6)], "-o", str(out),
           "--quiet"])

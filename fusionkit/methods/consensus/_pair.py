@@ -359,11 +359,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                   f"them cross its open floor, more than the {chk.agreeing} that meet")
     elif null.usable and null.misses_too_much(best.check):
         chk = best.check
-        reason = (f"best placement misses too much: {100 * chk.score:.0f}% of the walls meet, but "
-                  f"{chk.disagreeing} wall cells miss the other map's walls ({chk.conflicts} of them "
-                  f"on its open floor, counted thrice) against {chk.agreeing} that meet; two maps of "
-                  f"one place meet more than {null.misfit_weight:g} times as often where they overlap "
-                  f"(maps of a building of identical rooms that share no wall do not)")
+        reason = (f"best placement misses too much: {chk.agreeing} wall cells meet the other map's "
+                  f"walls and {chk.disagreeing} miss them, {chk.conflicts} of those on its open floor; "
+                  f"counting each of those three times, {chk.disagreeing + 2 * chk.conflicts} misses, "
+                  f"and two maps of one place meet more than {null.misfit_weight:g} times as often as "
+                  f"they miss where they overlap (maps of a building of identical rooms that share no "
+                  f"wall do not)")
     elif not null.usable:
         reason = ("nothing to judge a placement by: too few walls overlap at any placement to tell "
                   "a right one from a wrong one")
