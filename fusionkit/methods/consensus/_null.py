@@ -18,7 +18,7 @@ from ._index import MapIndex
 from ._memo import pair_memo, points_key, refine_memo, verify_memo
 from ._verify import DEFAULT_GATES, displacement
 
-__all__ = ["NullModel", "null_model", "search_tests"]
+__all__ = ["NullModel", "null_model", "search_tests", "weighted_misses"]
 
 
 def _trials(chk) -> tuple[float, float]:
@@ -26,6 +26,13 @@ def _trials(chk) -> tuple[float, float]:
     cells compared, a cell on the other's clear free space counted as three misses (the
     robust weighting of :meth:`Check.evidence`)."""
     return float(chk.agreeing), float(chk.agreeing + chk.disagreeing + 2 * chk.conflicts)
+
+
+def weighted_misses(chk) -> float:
+    """The wall cells of a check that miss the other map's walls, a cell on its clear free space
+    counted three times: the misses of :func:`_trials`."""
+    k, n = _trials(chk)
+    return n - k
 
 
 def _kl(f: float, p: float) -> float:
@@ -98,8 +105,7 @@ class NullModel:
         is no evidence of being the same place, however rarely wrong placements do as well: two
         maps of one place meet nearly everywhere they overlap, while a room or rack row of a
         repetitive building laid on another misses at every door and shelf that differs."""
-        k, n = _trials(chk)
-        return k - self.misfit_weight * (n - k) <= 0
+        return float(chk.agreeing) - self.misfit_weight * weighted_misses(chk) <= 0
 
     def nfa(self, chk) -> float:
         """Number of false alarms of a placement with check ``chk``."""

@@ -15,7 +15,7 @@ from ._config import ConsensusConfig
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
-from ._null import NullModel, null_model
+from ._null import NullModel, null_model, weighted_misses
 from ._memo import pair_memo, points_key, refine_memo, verify_memo
 from ._verify import (DEFAULT_GATES, Check, Placements, _in_cells, displacement, refine_cloud,
                       refine_icp, refine_pso, typical_move, verify)
@@ -361,7 +361,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         chk = best.check
         reason = (f"best placement misses too much: {chk.agreeing} wall cells meet the other map's "
                   f"walls and {chk.disagreeing} miss them, {chk.conflicts} of those on its open floor; "
-                  f"counting each of those three times, {chk.disagreeing + 2 * chk.conflicts} misses, "
+                  f"counting each of those three times, {weighted_misses(chk):.0f} misses, "
                   f"and two maps of one place meet more than {null.misfit_weight:g} times as often as "
                   f"they miss where they overlap (maps of a building of identical rooms that share no "
                   f"wall do not)")
