@@ -5,6 +5,7 @@
                               [--repetitive 6] [--splits 2 3 4] [--negatives 1.0]
                               [--peers map-merge fourier-mellin hough-spectrum spectral-pso]
                               [--peers-on-negatives] [--quick] [--out FILE] [--from FILE]
+    python benchmarks/lowo.py --pooled RECORD [RECORD ...] [--crop-records RECORD ...]
 
 Families of pairs of maps (K = 2), each pair with its truth and its *world* (the building; two
 maps of one building, such as the two RoboCup arena maps, the two Yujin runs or the Intel lab map
@@ -57,7 +58,10 @@ pairs this leaves out.
 The peers run on the same maps through :func:`fusionkit.pipeline.merge` (``MergeConfig(method=...)``,
 same seed), scored alike; their time is the merge's wall time less its fusion and the common-scale
 confidence. Prints Markdown tables; ``--out`` records every pair (JSON, written after every pair),
-``--from`` redoes the tables from such a record in seconds.
+``--from`` redoes the tables from such a record in seconds. ``--pooled`` judges several draws' records
+with offsets chosen on the negatives of all of them (and of the crop draws' records of
+``benchmarks/calibrate_consensus.py``, ``--crop-records``), each world left out: the rule the
+shipped constant is chosen by, the highest choice of several draws, measured out of sample.
 
 Default sizes: 5 crops, 2 explorations and 2 drifting explorations per real floor, 6 crops and 6
 explorations per repetitive world, the logs at K = 2, 3, 4, one negative per positive, one
@@ -373,6 +377,52 @@ def lowo(records: list[dict], eps: float, rivals: bool = True, margin: float = M
     return {"offsets": offsets, "in_sample": choose_offset(negs, eps, rivals, margin)}
 
 
+def pooled(draws: dict, crops: list[dict], eps: float, margin: float = MARGIN) -> str:
+    """The offsets chosen as the shipped constant is, on every draw at once: for each world left
+    out, the least offset at which the whole decision merges none of the negatives of two
+    buildings of *every* draw given (``draws``: name -> record of ``--out``) and of the crop draws
+    of ``benchmarks/calibrate_consensus.py --out`` (``crops``) that do not show it, plus
+    ``margin`` decades; each draw's pairs of that world judged with it. The shipped constant is
+    the highest of the draws' own choices, which is this choice with no world left out."""
+    def row(r):  # (world, other, model, rival) of a negative of two buildings
+        if "consensus" in r:
+            return r["world"], r["other"], r["consensus"]["log10_nfa_model"], bool(r["consensus"]["rivals"])
+        return r["world"], r["other"], r["log10_nfa_model"], bool(r["ambiguous"])
+    negs = [row(r) for d in draws.values() for r in d["pairs"]
+            if r["kind"] == "neg" and r["family"] != "apart"] + [row(r) for r in crops if r["kind"] == "neg"]
+
+    def choose(rows):
+        worst = min((m for _, _, m, rival in rows if m is not None and not rival), default=math.inf)
+        for c in GRID:
+            if not worst + c <= math.log10(eps):
+                return float(c) + margin
+        return math.inf
+    worlds = sorted({r[k] for d in draws.values() for r in d["pairs"] for k in ("world", "other") if r.get(k)})
+    offs = {w: choose([n for n in negs if w not in n[:2]]) for w in worlds}
+    ins = choose(negs)
+    lines = [f"Offsets chosen on the negatives of two buildings of {len(draws)} draws"
+             + (f" and {sum(r['kind'] == 'neg' for r in crops)} of the crop draws" if crops else "")
+             + f", per world left out: {min(offs.values()):.2f} to {max(offs.values()):.2f} decades"
+             + "".join(f"; {w} {o:.2f}" for w, o in sorted(offs.items()) if o != ins)
+             + f"; every other world and in sample {ins:.2f}.", "",
+             "| draw | resolvable placed, out of sample | at the in-sample offset | negative judgements "
+             "merged, out of sample | `apart` merged, out of sample |", "|---|---|---|---|---|"]
+    tot = [0] * 7
+    for name, d in draws.items():
+        pos = [r for r in d["pairs"] if r["kind"] == "pos" and r.get("resolvable")]
+        jud = _judgements([r for r in d["pairs"] if r["kind"] == "neg" and r["family"] != "apart"])
+        apart = [r for r in d["pairs"] if r["family"] == "apart"]
+        got = [sum(consensus_outcome(r, offs[r["world"]], eps) == "right" for r in pos), len(pos),
+               sum(consensus_outcome(r, ins, eps) == "right" for r in pos),
+               sum(merged(r, offs[w], eps) for r, w in jud), len(jud),
+               sum(merged(r, offs[r["world"]], eps) for r in apart), len(apart)]
+        tot = [t + g for t, g in zip(tot, got)]
+        lines.append(f"| {name} | {got[0]} / {got[1]} | {got[2]} | {got[3]} / {got[4]} | {got[5]} / {got[6]} |")
+    lines.append(f"| **all** | **{tot[0]} / {tot[1]} ({100 * tot[0] / max(tot[1], 1):.1f} %)** | {tot[2]} "
+                 f"| {tot[3]} / {tot[4]} | {tot[5]} / {tot[6]} |")
+    return "\n".join(lines)
+
+
 def _judgements(negs: list[dict]) -> list[tuple]:
     """``(negative, world left out)``: a negative once per world of it (once when both maps show
     one building)."""
@@ -550,7 +600,25 @@ def main(argv=None) -> int:
                     help="a smoke run: 4 floors, one pair each, K = 2 logs, no spectral-pso")
     ap.add_argument("--out", default=None, help="record every pair (JSON) here")
     ap.add_argument("--from", dest="source", default=None, help="redo the tables from a record")
+    ap.add_argument("--pooled", nargs="+", default=None, metavar="RECORD",
+                    help="records of several draws: each world's offset chosen on the negatives of all of them")
+    ap.add_argument("--crop-records", nargs="*", default=[], metavar="RECORD",
+                    help="with --pooled: records of benchmarks/calibrate_consensus.py --out, chosen on too")
     args = ap.parse_args(argv)
+    if args.pooled:
+        try:
+            draws = {Path(f).stem: json.loads(Path(f).read_text()) for f in args.pooled}
+            crops = [r for f in args.crop_records for r in json.loads(Path(f).read_text())]
+            eps = {d["max_false_merge"] for d in draws.values()}
+            if len(eps) != 1:
+                print("lowo: --pooled records were judged at different --max-false-merge; give records of one",
+                      file=sys.stderr)
+                return 2
+            print(pooled(draws, crops, eps.pop()))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"lowo: --pooled/--crop-records: not records written by --out ({exc}); give those", file=sys.stderr)
+            return 2
+        return 0
     if args.source:
         try:
             data = json.loads(Path(args.source).read_text())

@@ -99,3 +99,42 @@ def test_no_offset_clears_a_negative_at_every_decade_refuses_everything(lowo):
     assert lowo.consensus_outcome(pairs[0], ch["offsets"]["A"], 0.01) == "refused"
     assert "in sample inf" in lowo.tables({"max_false_merge": 0.01, "default_offset": 7.5,
                                           "peers": [], "pairs": pairs})
+
+
+def test_pooled_offsets_are_chosen_on_every_draw_and_the_crop_draws(lowo, tmp_path, capsys):
+    d1 = {"max_false_merge": 0.01, "default_offset": 7.5, "peers": [],
+          "pairs": [pos("A", -7.0), neg("A", "B", -8.0)]}
+    d2 = {"max_false_merge": 0.01, "default_offset": 7.5, "peers": [],
+          "pairs": [pos("C", -6.0), neg("B", "C", -5.0)]}
+    crops = [{"kind": "pos", "world": "A", "other": None, "right": True, "ambiguous": False,
+              "log10_nfa_model": -40.0},
+             {"kind": "neg", "world": "A", "other": "C", "right": None, "ambiguous": False,
+              "log10_nfa_model": -9.0}]
+    paths = []
+    for name, d in (("d1", d1), ("d2", d2), ("crops", crops)):
+        paths.append(tmp_path / f"{name}.json")
+        paths[-1].write_text(json.dumps(d))
+    # draw 1 alone has no negative without A: A would be judged with the least offset tried
+    assert lowo.lowo(d1["pairs"], 0.01)["offsets"]["A"] == -19.0
+    assert lowo.main(["--pooled", str(paths[0]), str(paths[1]), "--crop-records", str(paths[2])]) == 0
+    text = capsys.readouterr().out
+    # without A: B-C of draw 2 (-5), 4.25; without C: A-B (-8), 7.25; without B: the crop
+    # draws' A-C (-9), 8.25, which is also the choice on everything (the shipped rule)
+    assert "4.25 to 8.25 decades; A 4.25; C 7.25; every other world and in sample 8.25." in text
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[2:-1]]
+            for line in text.splitlines() if line.startswith("| ")}
+    # A's pair: -7 + 4.25 passes; C's: -6 + 7.25 does not; at 8.25 neither
+    assert rows["d1"] == ["1 / 1", "0", "1 / 2", "0 / 0"]   # A-B merged with A left out only
+    assert rows["d2"] == ["0 / 1", "0", "0 / 2", "0 / 0"]
+    assert rows["**all**"] == ["**1 / 2 (50.0 %)**", "0", "1 / 4", "0 / 0"]
+    # without the crop draws, B left out has no negative at all
+    assert lowo.main(["--pooled", str(paths[0]), str(paths[1])]) == 0
+    assert "B -19.00" in capsys.readouterr().out
+
+
+def test_pooled_records_it_cannot_read_are_one_line_and_exit_2(lowo, tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text("[]")
+    assert lowo.main(["--pooled", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not records written by --out" in err[0]
