@@ -475,3 +475,27 @@ def test_maps_of_one_building_that_share_no_wall_are_not_merged(tmp_path):
     for row in res["maps"]:
         if row["merged"]:
             assert row["error"]["translation_cells"] < 3, row
+
+
+def test_the_wider_search_of_a_map_left_out_does_not_merge_two_buildings():
+    """A window of the warehouse against one of the office (two buildings: every placement is
+    wrong). The first search refuses the pair; the fall-back, searching every rotation with
+    three times the starts, finds a placement that the first search's calibration would take
+    (10^-4.6 false alarms, 76 % of the walls meeting). Its placements are counted with
+    ``fallback_calibration`` more decades, and the map stays out."""
+    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
+
+    def window(world, n, seed):
+        return make_case(CaseSpec(n, WorldSpec(world, builtin=world), "crop", 2, seed),
+                         BenchConfig(methods=("consensus",), modes=("crop",), robots=(2,), cases=1, seed=1))
+    rack, room = window("warehouse", 3, 1511104745), window("office", 1, 560391118)
+    maps = [rack.grids[0], room.grids[1]]
+    shipped = merge(maps, config=MergeConfig(method="consensus", seed=9722))
+    p = shipped.placements[1]
+    assert not p.merged and "not distinguishable from chance" in p.reason
+    # judged with the first search's calibration alone, the same search merges it
+    loose = merge(maps, config=MergeConfig(method="consensus", seed=9722,
+                                           consensus=ConsensusConfig(fallback_calibration=0.0)))
+    assert loose.placements[1].merged
+    with pytest.raises(InputError, match="fallback_calibration"):
+        ConsensusConfig(fallback_calibration=-1.0)

@@ -117,12 +117,20 @@ class ConsensusConfig:
         When a map is left out, search its pairs again exhaustively: every ``fallback_step``
         degrees of rotation, three times as many candidates refined.
     fallback_step : float
-        Rotation step (degrees) of that search (its placements are judged by the same test: the
-        number of placements it could end on does not depend on how many starts it tries).
+        Rotation step (degrees) of that search (its placements are judged by the same test,
+        with ``fallback_calibration`` more decades).
     fallback_rotations : int
         Rotations of that search's sweep (made a level up the evidence pyramid, at every
         ``fallback_step`` degrees) whose translations are then searched in full; 0 to search
         every rotation of that grid in full, at the evidence raster's own resolution.
+    fallback_calibration : float
+        Decades added to ``calibration`` for the placements of that search. The calibration is
+        chosen on what the first search finds; searching every rotation with three times the
+        starts finds better wrong placements too (two pairs of two buildings that the first
+        search refused, at 10^5.3 and 10^-2.2 false alarms by the model before the offset, it
+        placed at 10^-6.9 and 10^-8.4). Chosen by the calibration's rule on what the fall-back
+        found for the pairs of two buildings the first search refused (BENCHMARKS.md, the
+        fall-back).
     null_margin : float
         Decades: the null distribution is drawn in batches (32 wrong placements first, then 16
         at a time), and stops being drawn once the placement under test stays this far short
@@ -176,6 +184,7 @@ class ConsensusConfig:
     fallback: bool = True
     fallback_step: float = 2.0
     fallback_rotations: int = 12
+    fallback_calibration: float = 3.75
     null_margin: float = 2.0
     loop_cells: float = 8.0
     final_check: bool = True
@@ -190,6 +199,10 @@ class ConsensusConfig:
         if not (isinstance(self.calibration, (int, float)) and not isinstance(self.calibration, bool)
                 and math.isfinite(self.calibration)):
             raise InputError(f"calibration is a finite number of decades, got {self.calibration!r}")
+        v = self.fallback_calibration
+        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                and v >= 0):
+            raise InputError(f"fallback_calibration is a number of decades >= 0, got {v!r}")
         if not 0.0 < self.rival <= 1.0:
             raise InputError(f"rival is a fraction in (0, 1], got {self.rival}")
         v = self.misfit_weight

@@ -305,7 +305,8 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                 and all(chk.evidence() < 0.5 * best.rank for _, chk in drawn))
 
     null, wrong = null_model(a, b, best.transform, box, samples=cfg.null_samples,
-                             distinct=distinct, points=thin, calibration=cfg.calibration,
+                             distinct=distinct, points=thin,
+                             calibration=cfg.calibration + (cfg.fallback_calibration if exhaustive else 0.0),
                              correlation=cfg.wall_correlation,
                              correlation_max=cfg.wall_correlation_max,
                              basin=cfg.test_basin, settled=settled,
