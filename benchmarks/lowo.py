@@ -244,6 +244,34 @@ def negatives(pos: list[dict], ratio: float, seed: int, fam_id: int) -> list[dic
     return out
 
 
+def draw_pairs(st: dict, real, builtin, logs_dir: Path, tmp: Path, skipped: list):
+    """``(family, pair)`` for every pair of a draw, in the order a record holds them: ``st``
+    holds the command's sizes (``seed``, ``families``, ``crops``, ``explore``, ``drift_cases``,
+    ``drift``, ``drift_theta``, ``repetitive``, ``splits``, ``apart``, ``negatives``), as the
+    record's ``settings`` do."""
+    for fid, fam in enumerate(FAMILIES):
+        if fam not in st["families"]:
+            continue
+        if fam == "crop":
+            pos = case_pairs(fam, real, st["crops"], st["seed"], fid, modes=("crop",), skipped=skipped)
+        elif fam == "explore":
+            pos = case_pairs(fam, real, st["explore"], st["seed"], fid, modes=("explore",), skipped=skipped)
+        elif fam == "drift":
+            pos = case_pairs(fam, real, st["drift_cases"], st["seed"], fid, modes=("explore",),
+                             drift=(st["drift"], st["drift_theta"]), skipped=skipped)
+        elif fam == "repetitive":
+            pos = case_pairs(fam, builtin, st["repetitive"], st["seed"], fid, modes=("crop", "explore"),
+                             skipped=skipped)
+        elif fam == "logs":
+            pos = log_pairs(logs_dir, st["splits"], st["seed"], tmp, skipped)
+        if fam == "apart":
+            pos, neg = [], apart_pairs(real, st["apart"], st["seed"], fid)
+        else:
+            neg = negatives(pos, st["negatives"], st["seed"], fid)
+        for p in pos + neg:
+            yield fam, p
+
+
 # ---------------------------------------------------------------------------------------------
 # Running the methods on one pair
 # ---------------------------------------------------------------------------------------------
@@ -348,14 +376,20 @@ def merged(rec: dict, offset: float, eps: float, *, rivals: bool = True) -> bool
             and not (rivals and c["rivals"]))
 
 
+def least_offset(merges, margin: float = MARGIN, least: float = -math.inf) -> float:
+    """The least offset of ``GRID`` (from ``least``) at which ``merges(offset)`` is false, plus
+    ``margin`` decades; ``inf`` when there is none."""
+    for c in GRID:
+        if c >= least and not merges(float(c)):
+            return float(c) + margin
+    return math.inf
+
+
 def choose_offset(negs: list[dict], eps: float, rivals: bool = True, margin: float = MARGIN) -> float:
     """The least offset (quarter decades) at which none of ``negs`` is merged, plus ``margin``
     decades: merged by the whole decision (the test and the rival test), as the shipped constant
     is chosen, or without ``rivals`` by the test alone."""
-    for c in GRID:
-        if not any(merged(r, c, eps, rivals=rivals) for r in negs):
-            return float(c) + margin
-    return math.inf
+    return least_offset(lambda c: any(merged(r, c, eps, rivals=rivals) for r in negs), margin)
 
 
 def consensus_outcome(rec: dict, offset: float, eps: float) -> str:
@@ -393,10 +427,7 @@ def pooled(draws: dict, crops: list[dict], eps: float, margin: float = MARGIN) -
 
     def choose(rows):
         worst = min((m for _, _, m, rival in rows if m is not None and not rival), default=math.inf)
-        for c in GRID:
-            if not worst + c <= math.log10(eps):
-                return float(c) + margin
-        return math.inf
+        return least_offset(lambda c: worst + c <= math.log10(eps), margin)
     worlds = sorted({r[k] for d in draws.values() for r in d["pairs"] for k in ("world", "other") if r.get(k)})
     offs = {w: choose([n for n in negs if w not in n[:2]]) for w in worlds}
     ins = choose(negs)
@@ -673,26 +704,7 @@ def main(argv=None) -> int:
     out = Path(args.out) if args.out else None
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        for fid, fam in enumerate(FAMILIES):
-            if fam not in args.families:
-                continue
-            if fam == "crop":
-                pos = case_pairs(fam, real, args.crops, args.seed, fid, modes=("crop",), skipped=skipped)
-            elif fam == "explore":
-                pos = case_pairs(fam, real, args.explore, args.seed, fid, modes=("explore",), skipped=skipped)
-            elif fam == "drift":
-                pos = case_pairs(fam, real, args.drift_cases, args.seed, fid, modes=("explore",),
-                                 drift=(args.drift, args.drift_theta), skipped=skipped)
-            elif fam == "repetitive":
-                pos = case_pairs(fam, builtin, args.repetitive, args.seed, fid, modes=("crop", "explore"),
-                                 skipped=skipped)
-            elif fam == "logs":
-                pos = log_pairs(logs_dir, args.splits, args.seed, Path(tmp), skipped)
-            if fam == "apart":
-                pos, neg = [], apart_pairs(real, args.apart, args.seed, fid)
-            else:
-                neg = negatives(pos, args.negatives, args.seed, fid)
-            for p in pos + neg:
+        for fam, p in draw_pairs(vars(args), real, builtin, logs_dir, Path(tmp), skipped):
                 rec = run_pair(p, args.peers, with_peers=p["truth"] is not None or args.peers_on_negatives)
                 data["pairs"].append(rec)
                 c = rec["consensus"]

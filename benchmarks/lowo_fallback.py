@@ -36,65 +36,45 @@ sys.path.insert(0, str(HERE))
 import lowo as L  # noqa: E402
 
 
-def run(record: dict, seed_sizes: dict, maps: str, logs: str, out: Path | None) -> list[dict]:
+def run(record: dict, st: dict, maps: str, logs: str, out: Path | None) -> list[dict]:
     from fusionkit.bench import find_worlds
     from fusionkit.methods.consensus import ConsensusConfig, estimate_maps
-    st = seed_sizes
     real, _ = find_worlds([maps])
     builtin, _ = find_worlds([], ["office", "warehouse"])
     cfg = ConsensusConfig(fallback_calibration=0.0)
     rec = record["pairs"]
     res, k, skipped = [], 0, []
     with tempfile.TemporaryDirectory() as tmp:
-        for fid, fam in enumerate(L.FAMILIES):
-            if fam not in st["families"]:
+        for fam, p in L.draw_pairs(st, real, builtin, Path(logs), Path(tmp), skipped):
+            r = rec[k]
+            k += 1
+            if r["source"] != p["source"] or r["case_seed"] != p["case_seed"]:
+                raise SystemExit(f"lowo_fallback: pair {k - 1} is {p['source']!r}, the record's is "
+                                 f"{r['source']!r}: give the maps, logs and sizes the record was made with")
+            if r["consensus"]["accepted"]:
                 continue
-            if fam == "crop":
-                pos = L.case_pairs(fam, real, st["crops"], st["seed"], fid, modes=("crop",), skipped=skipped)
-            elif fam == "explore":
-                pos = L.case_pairs(fam, real, st["explore"], st["seed"], fid, modes=("explore",), skipped=skipped)
-            elif fam == "drift":
-                pos = L.case_pairs(fam, real, st["drift_cases"], st["seed"], fid, modes=("explore",),
-                                   drift=(st["drift"], st["drift_theta"]), skipped=skipped)
-            elif fam == "repetitive":
-                pos = L.case_pairs(fam, builtin, st["repetitive"], st["seed"], fid, modes=("crop", "explore"),
-                                   skipped=skipped)
-            elif fam == "logs":
-                pos = L.log_pairs(Path(logs), st["splits"], st["seed"], Path(tmp), skipped)
-            if fam == "apart":
-                pos, neg = [], L.apart_pairs(real, st["apart"], st["seed"], fid)
-            else:
-                neg = L.negatives(pos, st["negatives"], st["seed"], fid)
-            for p in pos + neg:
-                r = rec[k]
-                k += 1
-                if r["source"] != p["source"] or r["case_seed"] != p["case_seed"]:
-                    raise SystemExit(f"lowo_fallback: pair {k - 1} is {p['source']!r}, the record's is "
-                                     f"{r['source']!r}: give the maps, logs and sizes the record was made with")
-                if r["consensus"]["accepted"]:
-                    continue
-                t0 = time.perf_counter()
-                mr = estimate_maps([p["a"], p["b"]], [p["scans_a"], p["scans_b"]], config=cfg,
-                                   seed=p["case_seed"] % 10_000)
-                pr = mr.pairs[(0, 1)]
-                lg = pr.diagnostics.get("log10_nfa", math.inf)
-                best = pr.best.transform if pr.best is not None else None
-                truth = p["truth"]
-                res.append({"index": k - 1, "family": fam, "kind": r["kind"], "source": p["source"],
-                            "world": r["world"], "other": r.get("other"), "resolvable": r.get("resolvable"),
-                            "first_model": r["consensus"]["log10_nfa_model"],
-                            "model": (lg - cfg.calibration) if math.isfinite(lg) else None,
-                            "rivals": int(pr.diagnostics.get("rivals", int(pr.ambiguous))),
-                            "best": "refused" if best is None else ("wrong" if truth is None
-                                                                    else L._outcome(best, truth, p["b"])),
-                            "seconds": round(time.perf_counter() - t0, 3),
-                            "fallback_seconds": round(mr.seconds.get("fallback", 0.0), 3)})
-                print(f"{fam:10} {r['kind']} {p['source'][:48]:48} first {r['consensus']['log10_nfa_model']!s:.7} "
-                      f"fall-back {res[-1]['model']!s:.7} best {res[-1]['best']}", file=sys.stderr, flush=True)
-                if out:
-                    from fusionkit._atomic import write_text_atomic
-                    write_text_atomic(out, json.dumps({"settings": st, "eps": record["max_false_merge"],
-                                                       "calibration": cfg.calibration, "pairs": res}, indent=1))
+            t0 = time.perf_counter()
+            mr = estimate_maps([p["a"], p["b"]], [p["scans_a"], p["scans_b"]], config=cfg,
+                               seed=p["case_seed"] % 10_000)
+            pr = mr.pairs[(0, 1)]
+            lg = pr.diagnostics.get("log10_nfa", math.inf)
+            best = pr.best.transform if pr.best is not None else None
+            truth = p["truth"]
+            res.append({"index": k - 1, "family": fam, "kind": r["kind"], "source": p["source"],
+                        "world": r["world"], "other": r.get("other"), "resolvable": r.get("resolvable"),
+                        "first_model": r["consensus"]["log10_nfa_model"],
+                        "model": (lg - cfg.calibration) if math.isfinite(lg) else None,
+                        "rivals": int(pr.diagnostics.get("rivals", int(pr.ambiguous))),
+                        "best": "refused" if best is None else ("wrong" if truth is None
+                                                                else L._outcome(best, truth, p["b"])),
+                        "seconds": round(time.perf_counter() - t0, 3),
+                        "fallback_seconds": round(mr.seconds.get("fallback", 0.0), 3)})
+            print(f"{fam:10} {r['kind']} {p['source'][:48]:48} first {r['consensus']['log10_nfa_model']!s:.7} "
+                  f"fall-back {res[-1]['model']!s:.7} best {res[-1]['best']}", file=sys.stderr, flush=True)
+            if out:
+                from fusionkit._atomic import write_text_atomic
+                write_text_atomic(out, json.dumps({"settings": st, "eps": record["max_false_merge"],
+                                                   "calibration": cfg.calibration, "pairs": res}, indent=1))
     return res
 
 
@@ -103,10 +83,8 @@ def merged(r: dict, calibration: float, extra: float, eps: float) -> bool:
 
 
 def choose(rows: list[dict], calibration: float, eps: float, margin: float = L.MARGIN) -> float:
-    for c in L.GRID:
-        if c >= 0 and not any(merged(r, calibration, c, eps) for r in rows):
-            return float(c) + margin
-    return math.inf
+    """The least offset >= 0 at which none of ``rows`` is merged, plus ``margin``."""
+    return L.least_offset(lambda c: any(merged(r, calibration, c, eps) for r in rows), margin, least=0.0)
 
 
 def tables(draws: dict) -> str:
