@@ -78,19 +78,28 @@ def draw_pairs(maps_dir: Path, count: int, seed: int) -> list[dict]:
                          "other": BUILDING.get(n2, n2) if kind == "neg" else None,
                          "right": right, "ambiguous": bool(pr.ambiguous),
                          "log10_nfa_model": pr.diagnostics["log10_nfa"] - cfg.calibration,
-                         "score": pr.best.check.score})
+                         "score": pr.best.check.score,
+                         "cross_wall_m": float(pr.diagnostics["cross_wall_m"])})
             print(json.dumps(rows[-1]), flush=True)
     return rows
 
 
+def refused_anyway(row: dict) -> bool:
+    """Refused at every offset: a rival nearly as good (ambiguous), or walls that all run one
+    way (``ConsensusConfig.cross_wall``; rows recorded before that check have no measure)."""
+    from fusionkit.methods.consensus import ConsensusConfig
+    m = row.get("cross_wall_m")
+    return row["ambiguous"] or (m is not None and m < ConsensusConfig().cross_wall)
+
+
 def merged(row: dict, offset: float) -> bool:
-    return row["log10_nfa_model"] + offset <= math.log10(EPS) and not row["ambiguous"]
+    return row["log10_nfa_model"] + offset <= math.log10(EPS) and not refused_anyway(row)
 
 
 def least_offset(rows: list[dict], margin: float) -> float:
     """The least offset (quarter decades, from -20: below 0 the model counts more false alarms
     than occur) at which none of the negatives ``rows`` is merged, plus ``margin``."""
-    worst = min((r["log10_nfa_model"] for r in rows if not r["ambiguous"]), default=math.inf)
+    worst = min((r["log10_nfa_model"] for r in rows if not refused_anyway(r)), default=math.inf)
     least = math.ceil((math.log10(EPS) - worst) * 4 + 1e-9) / 4 if math.isfinite(worst) else -20.0
     return max(least, -20.0) + margin
 

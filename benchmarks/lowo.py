@@ -5,7 +5,7 @@
                               [--repetitive 6] [--splits 2 3 4] [--negatives 1.0]
                               [--peers map-merge fourier-mellin hough-spectrum spectral-pso]
                               [--peers-on-negatives] [--quick] [--out FILE] [--from FILE]
-    python benchmarks/lowo.py --pooled RECORD [RECORD ...] [--crop-records RECORD ...]
+    python benchmarks/lowo.py --pooled RECORD [RECORD ...] [--crop-records RECORD ...] [--cross-wall M]
 
 Families of pairs of maps (K = 2), each pair with its truth and its *world* (the building; two
 maps of one building, such as the two RoboCup arena maps, the two Yujin runs or the Intel lab map
@@ -38,7 +38,10 @@ default settings) and the inputs of its decision are recorded: ``log10_nfa - cal
 model's count of false alarms without the calibrated offset), whether a distinct rival placement
 fits nearly as well (the rival test does not depend on the offset), and whether its best placement
 is right (within 3 cells at the moving map's known-area centroid and 2 degrees). With an offset
-``c`` a pair is merged when ``model + c <= log10(max_false_merge)`` and no rival is found.
+``c`` a pair is merged when ``model + c <= log10(max_false_merge)``, no rival is found and the
+walls that meet at its best placement fix it in every direction (``cross_wall_m``, the metres of
+them across the direction it is least held in, at least ``ConsensusConfig.cross_wall``; neither
+check depends on the offset).
 
 Leave-one-world-out: for each world, the offset is chosen on the negatives of all the other worlds
 by the rule the shipped constant was chosen by (the least offset, in quarter decades and possibly
@@ -93,6 +96,9 @@ PEERS = ("map-merge", "fourier-mellin", "hough-spectrum", "spectral-pso")
 GRID = np.arange(-20.0, 100.01, 0.25)
 #: decades added to the least offset that merges no negative (as the shipped constant was chosen)
 MARGIN = 1.0
+#: ``--cross-wall``: the least metres of meeting wall across a placement the tables judge with
+#: (None: the shipped ``ConsensusConfig.cross_wall``)
+CROSS_WALL = None
 #: map or log name -> building, where two of them show the same place
 SAME_PLACE = {"robocup17_nagoya_gmapping": "robocup17_nagoya", "robocup17_nagoya_srrg": "robocup17_nagoya",
               "yujin_office_run1": "yujin_office", "yujin_office_run2": "yujin_office",
@@ -324,7 +330,9 @@ def run_pair(p: dict, peers, with_peers: bool) -> dict:
         "ambiguous": bool(pr.ambiguous), "accepted": bool(pr.accepted),
         "best": _outcome(best, truth, b) if best is not None else "refused",
         "best_error": _err(best, truth, b),
-        "seconds": round(sec, 4), "reason": pr.reason}
+        "seconds": round(sec, 4), "reason": pr.reason,
+        "cross_wall_m": (round(float(pr.diagnostics["cross_wall_m"]), 4)
+                         if "cross_wall_m" in pr.diagnostics else None)}
     placed = {}
     if with_peers:
         for m in peers:
@@ -365,6 +373,28 @@ def run_pair(p: dict, peers, with_peers: bool) -> dict:
     return rec
 
 
+def _key(rec: dict) -> tuple:
+    return (rec["family"], rec["source"], rec["case_seed"], rec["kind"])
+
+
+def with_earlier_peers(rec: dict, earlier: dict, peers) -> dict:
+    """``rec`` (the consensus method alone) with the peers' results of the same pair in an
+    earlier record: their outcomes, and the truth's rival when a peer's placement was it (the
+    peers' placements are not recorded, so whether the pair is resolvable is the earlier
+    record's when a peer found its rival). A pair the earlier record lacks is left as it is."""
+    old = earlier.get(_key(rec))
+    if old is None:
+        return rec
+    for m in peers:
+        if m in old:
+            rec[m] = old[m]
+    if (rec["kind"] == "pos" and old.get("rival_by") in peers
+            and (rec["rival_evidence"] is None or old["rival_evidence"] > rec["rival_evidence"])):
+        rec.update(rival_evidence=old["rival_evidence"], rival_by=old["rival_by"],
+                   resolvable=bool(old["rival_evidence"] < rec["truth_evidence"]))
+    return rec
+
+
 # ---------------------------------------------------------------------------------------------
 # Tables
 # ---------------------------------------------------------------------------------------------
@@ -373,7 +403,19 @@ def merged(rec: dict, offset: float, eps: float, *, rivals: bool = True) -> bool
     ``rivals``, the test alone, before the rival test."""
     c = rec["consensus"]
     return (c["log10_nfa_model"] is not None and c["log10_nfa_model"] + offset <= math.log10(eps)
-            and not (rivals and c["rivals"]))
+            and not (rivals and c["rivals"]) and not slides(rec))
+
+
+def slides(rec: dict, least: float | None = None) -> bool:
+    """Whether the consensus decision refuses the pair's best placement as free to slide along
+    its walls (``cross_wall_m`` under ``least``, the shipped ``ConsensusConfig.cross_wall`` by
+    default): ``rec`` a record of ``--out`` or of ``benchmarks/calibrate_consensus.py --out``;
+    records made before the check have no measure and never slide."""
+    from fusionkit.methods.consensus import ConsensusConfig
+    m = rec.get("consensus", rec).get("cross_wall_m")
+    if least is None:
+        least = ConsensusConfig().cross_wall if CROSS_WALL is None else CROSS_WALL
+    return m is not None and m < least
 
 
 def least_offset(merges, margin: float = MARGIN, least: float = -math.inf) -> float:
@@ -418,10 +460,11 @@ def pooled(draws: dict, crops: list[dict], eps: float, margin: float = MARGIN) -
     of ``benchmarks/calibrate_consensus.py --out`` (``crops``) that do not show it, plus
     ``margin`` decades; each draw's pairs of that world judged with it. The shipped constant is
     the highest of the draws' own choices, which is this choice with no world left out."""
-    def row(r):  # (world, other, model, rival) of a negative of two buildings
+    def row(r):  # (world, other, model, refused at every offset) of a negative of two buildings
         if "consensus" in r:
-            return r["world"], r["other"], r["consensus"]["log10_nfa_model"], bool(r["consensus"]["rivals"])
-        return r["world"], r["other"], r["log10_nfa_model"], bool(r["ambiguous"])
+            return (r["world"], r["other"], r["consensus"]["log10_nfa_model"],
+                    bool(r["consensus"]["rivals"]) or slides(r))
+        return r["world"], r["other"], r["log10_nfa_model"], bool(r["ambiguous"]) or slides(r)
     negs = [row(r) for d in draws.values() for r in d["pairs"]
             if r["kind"] == "neg" and r["family"] != "apart"] + [row(r) for r in crops if r["kind"] == "neg"]
 
@@ -624,6 +667,9 @@ def main(argv=None) -> int:
     ap.add_argument("--negatives", type=float, default=1.0, help="negatives per positive, per family")
     ap.add_argument("--peers", nargs="*", default=list(PEERS))
     ap.add_argument("--peers-on-negatives", action="store_true", help="run the peers on the negatives too")
+    ap.add_argument("--peers-from", default=None, metavar="RECORD",
+                    help="take the peers' results from this earlier record of the same draw "
+                         "instead of running them (the consensus method alone runs again)")
     ap.add_argument("--families", nargs="+", default=list(FAMILIES), choices=FAMILIES)
     ap.add_argument("--max-false-merge", type=float, default=None,
                     help="risk the decision is judged at (default: ConsensusConfig's)")
@@ -635,7 +681,19 @@ def main(argv=None) -> int:
                     help="records of several draws: each world's offset chosen on the negatives of all of them")
     ap.add_argument("--crop-records", nargs="*", default=[], metavar="RECORD",
                     help="with --pooled: records of benchmarks/calibrate_consensus.py --out, chosen on too")
+    ap.add_argument("--cross-wall", type=float, default=None, metavar="M",
+                    help="with --from or --pooled: judge the records as if ConsensusConfig.cross_wall were M")
     args = ap.parse_args(argv)
+    global CROSS_WALL
+    CROSS_WALL = None
+    if args.cross_wall is not None:
+        if not (math.isfinite(args.cross_wall) and args.cross_wall >= 0):
+            print(f"lowo: --cross-wall is metres >= 0, got {args.cross_wall}", file=sys.stderr)
+            return 2
+        if not (args.pooled or args.source):
+            print("lowo: --cross-wall judges recorded pairs: give it with --from or --pooled", file=sys.stderr)
+            return 2
+        CROSS_WALL = args.cross_wall
     if args.pooled:
         try:
             draws = {Path(f).stem: json.loads(Path(f).read_text()) for f in args.pooled}
@@ -679,6 +737,16 @@ def main(argv=None) -> int:
     if any(k < 2 for k in args.splits):
         print("lowo: --splits are numbers of sessions, each >= 2", file=sys.stderr)
         return 2
+    earlier = {}
+    if args.peers_from:
+        try:
+            prev = json.loads(Path(args.peers_from).read_text())
+            earlier = {_key(r): r for r in prev["pairs"]}
+            args.peers = list(prev["peers"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            print(f"lowo: --peers-from {args.peers_from}: not a record written by --out ({exc}); give one",
+                  file=sys.stderr)
+            return 2
     if args.quick:
         args.crops, args.explore, args.drift_cases, args.repetitive, args.apart = 1, 1, 1, 1, 0
         args.splits = [2]
@@ -705,7 +773,10 @@ def main(argv=None) -> int:
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         for fam, p in draw_pairs(vars(args), real, builtin, logs_dir, Path(tmp), skipped):
-                rec = run_pair(p, args.peers, with_peers=p["truth"] is not None or args.peers_on_negatives)
+                if args.peers_from:
+                    rec = with_earlier_peers(run_pair(p, (), False), earlier, args.peers)
+                else:
+                    rec = run_pair(p, args.peers, with_peers=p["truth"] is not None or args.peers_on_negatives)
                 data["pairs"].append(rec)
                 c = rec["consensus"]
                 print(f"{fam:10} {rec['kind']} {rec['source'][:48]:48} model {c['log10_nfa_model'] if c['log10_nfa_model'] is None else round(c['log10_nfa_model'], 2)!s:>7} "

@@ -9,7 +9,8 @@ that the first search refused, and the choice of its calibration.
 searches the pairs of a map it left out again, exhaustively (``ConsensusConfig.fallback``): every
 rotation at 2 degrees, three times the starts. ``--record`` rebuilds the pairs of the draw that
 record was made from (same seed and default sizes, checked pair by pair against the record),
-and merges each pair the record shows refused as :func:`fusionkit.pipeline.merge` would
+and merges each pair the first search refuses with the shipped settings (the record's inputs of
+the decision judged with the shipped ``calibration`` and ``cross_wall``) as :func:`fusionkit.pipeline.merge` would
 (:func:`fusionkit.methods.consensus.estimate_maps`, K = 2, shipped settings but
 ``fallback_calibration`` = 0, so that the record holds the model's count before it), and records
 what the fall-back found: the model's count of false alarms without the offsets, its rivals,
@@ -42,6 +43,7 @@ def run(record: dict, st: dict, maps: str, logs: str, out: Path | None) -> list[
     real, _ = find_worlds([maps])
     builtin, _ = find_worlds([], ["office", "warehouse"])
     cfg = ConsensusConfig(fallback_calibration=0.0)
+    cal, eps = cfg.calibration, record["max_false_merge"]
     rec = record["pairs"]
     res, k, skipped = [], 0, []
     with tempfile.TemporaryDirectory() as tmp:
@@ -51,8 +53,8 @@ def run(record: dict, st: dict, maps: str, logs: str, out: Path | None) -> list[
             if r["source"] != p["source"] or r["case_seed"] != p["case_seed"]:
                 raise SystemExit(f"lowo_fallback: pair {k - 1} is {p['source']!r}, the record's is "
                                  f"{r['source']!r}: give the maps, logs and sizes the record was made with")
-            if r["consensus"]["accepted"]:
-                continue
+            if L.merged(r, cal, eps):
+                continue                               # the first search's decision as shipped now
             t0 = time.perf_counter()
             mr = estimate_maps([p["a"], p["b"]], [p["scans_a"], p["scans_b"]], config=cfg,
                                seed=p["case_seed"] % 10_000)
@@ -65,6 +67,8 @@ def run(record: dict, st: dict, maps: str, logs: str, out: Path | None) -> list[
                         "first_model": r["consensus"]["log10_nfa_model"],
                         "model": (lg - cfg.calibration) if math.isfinite(lg) else None,
                         "rivals": int(pr.diagnostics.get("rivals", int(pr.ambiguous))),
+                        "cross_wall_m": (round(float(pr.diagnostics["cross_wall_m"]), 4)
+                                         if "cross_wall_m" in pr.diagnostics else None),
                         "best": "refused" if best is None else ("wrong" if truth is None
                                                                 else L._outcome(best, truth, p["b"])),
                         "seconds": round(time.perf_counter() - t0, 3),
@@ -79,7 +83,8 @@ def run(record: dict, st: dict, maps: str, logs: str, out: Path | None) -> list[
 
 
 def merged(r: dict, calibration: float, extra: float, eps: float) -> bool:
-    return r["model"] is not None and r["model"] + calibration + extra <= math.log10(eps) and not r["rivals"]
+    return (r["model"] is not None and r["model"] + calibration + extra <= math.log10(eps)
+            and not r["rivals"] and not L.slides({"consensus": r}))
 
 
 def choose(rows: list[dict], calibration: float, eps: float, margin: float = L.MARGIN) -> float:
@@ -156,8 +161,9 @@ def main(argv=None) -> int:
         print("lowo_fallback: the record is of a --quick run; give one of default sizes", file=sys.stderr)
         return 2
     res = run(record, st, args.maps or st["maps"], args.logs or st["logs"], Path(args.out) if args.out else None)
+    from fusionkit.methods.consensus import ConsensusConfig
     print(tables({Path(args.record).stem: {"settings": st, "eps": record["max_false_merge"],
-                                           "calibration": record["default_offset"], "pairs": res}}))
+                                           "calibration": ConsensusConfig().calibration, "pairs": res}}))
     return 0
 
 

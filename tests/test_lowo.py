@@ -138,3 +138,42 @@ def test_pooled_records_it_cannot_read_are_one_line_and_exit_2(lowo, tmp_path, c
     assert lowo.main(["--pooled", str(bad)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not records written by --out" in err[0]
+
+
+def test_a_placement_free_to_slide_is_refused_at_every_offset(lowo, record):
+    """A pair whose best placement lies along walls that all run one way (``cross_wall_m``
+    under ``ConsensusConfig.cross_wall``) is refused whatever the offset, so it neither sets
+    the offset nor counts as placed; records made before the measure never slide."""
+    slid = neg("A", "C", -60.0)
+    slid["consensus"]["cross_wall_m"] = 0.02
+    held = neg("A", "C", -60.0)
+    held["consensus"]["cross_wall_m"] = 5.0
+    base = lowo.lowo(record["pairs"], 0.01)
+    assert lowo.lowo(record["pairs"] + [slid], 0.01) == base
+    assert lowo.lowo(record["pairs"] + [held], 0.01)["in_sample"] == 59.25
+    assert lowo.lowo(record["pairs"] + [neg("A", "C", -60.0)], 0.01)["in_sample"] == 59.25
+    moved = pos("A", -20.0)
+    moved["consensus"]["cross_wall_m"] = 0.5
+    assert lowo.consensus_outcome(moved, 100.0, 0.01) == "refused"
+    assert lowo.consensus_outcome(pos("A", -20.0), -10.0, 0.01) == "right"
+    crop = {"kind": "neg", "world": "A", "other": "C", "ambiguous": False,
+            "log10_nfa_model": -60.0, "cross_wall_m": 0.3}
+    assert lowo.slides(crop) and not lowo.slides(dict(crop, cross_wall_m=3.0))
+
+
+def test_peers_taken_from_an_earlier_record_of_the_same_draw(lowo):
+    """``--peers-from``: the consensus method runs again, the peers' outcomes (and the truth's
+    rival, when a peer's placement was it) come from the earlier record of the same pair."""
+    earlier = pos("A", -20.0)
+    earlier.update(case_seed=7, truth_evidence=100.0, rival_evidence=120.0, rival_by="map-merge",
+                   resolvable=False)
+    now = pos("A", -21.0, mm="refused")
+    now.pop("map-merge")
+    now.update(case_seed=7, truth_evidence=100.0, rival_evidence=50.0, rival_by="consensus search",
+               resolvable=True)
+    other = dict(now, case_seed=8)
+    got = lowo.with_earlier_peers(now, {lowo._key(earlier): earlier}, ["map-merge"])
+    assert got["map-merge"] == {"outcome": "right", "seconds": 0.1}
+    assert got["consensus"]["log10_nfa_model"] == -21.0
+    assert got["rival_by"] == "map-merge" and got["resolvable"] is False
+    assert "map-merge" not in lowo.with_earlier_peers(other, {lowo._key(earlier): earlier}, ["map-merge"])

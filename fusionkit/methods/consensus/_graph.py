@@ -136,7 +136,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     witness = {(p.a, p.b): (p.transform, p.confidence, p.best.rank)
                for p in pairs.values()
                if not p.accepted and not p.ambiguous and p.best is not None and p.nfa <= 1.0
-               and not p.diagnostics.get("rivals")}
+               and not p.diagnostics.get("rivals") and not p.diagnostics.get("slides")}
     dropped: list = []
     resolved: list = []
 

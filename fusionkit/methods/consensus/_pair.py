@@ -17,6 +17,7 @@ from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
 from ._null import NullModel, null_model, weighted_misses
 from ._memo import pair_memo, points_key, refine_memo, verify_memo
+from ._slide import cross_wall
 from ._verify import (DEFAULT_GATES, Check, Placements, _in_cells, displacement, refine_cloud,
                       refine_icp, refine_pso, typical_move, verify)
 
@@ -342,17 +343,25 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         if c.nfa <= eps and all(displacement(c.transform, p.transform, box) > distinct
                                 for p in plausible + rivals):
             plausible.append(c)
-    accepted = significant and not rivals
+    # walls that all run one way hold the placement across them only: slid along them it fits
+    # as well, and the wrong placements drawn at random rarely land there (:mod:`._slide`)
+    across = cross_wall(a, b, best.transform)
+    slides = across < cfg.cross_wall
+    accepted = significant and not rivals and not slides
     if significant and rivals:
         plausible = [best] + rivals + plausible[1:]
     nfa = best.nfa
     confidence = best.confidence
     if accepted:
         reason = ""
-    elif significant:
+    elif significant and rivals:
         reason = (f"ambiguous: {len(rivals) + 1} distinct placements fit about as well "
                   f"({100 * min(r.check.score for r in rivals):.0f}-{100 * best.check.score:.0f}% "
                   "of the walls meet) and the maps alone cannot tell them apart")
+    elif significant:
+        reason = (f"the placement may slide: the walls that meet all run one way (a straight wall, "
+                  f"a corridor's two sides) and only {across:.2f} m of meeting wall runs across "
+                  f"them, where {cfg.cross_wall:g} m is needed to fix it along them")
     elif best.rank <= 0:
         chk = best.check
         reason = (f"best placement is contradicted: {100 * chk.score:.0f}% of the walls meet, but "
@@ -379,4 +388,5 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                       len(starts), n_hyp, reason, time.perf_counter() - t0,
                       {"rotations": len(rots), "check": best.check.as_dict(),
                        "log10_nfa": log_nfa, "null_p0": null.p0, "null_design": null.design,
-                       "tests": null.tests, "rivals": len(rivals)}, nfa, null)
+                       "tests": null.tests, "rivals": len(rivals), "cross_wall_m": across,
+                       "slides": bool(slides)}, nfa, null)
