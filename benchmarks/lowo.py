@@ -373,6 +373,11 @@ def run_pair(p: dict, peers, with_peers: bool) -> dict:
     return rec
 
 
+def _measured(records: list[dict]) -> bool:
+    """Whether any of ``records`` carries the one-way measure (``cross_wall_m``)."""
+    return any(r.get("consensus", r).get("cross_wall_m") is not None for r in records)
+
+
 def _key(rec: dict) -> tuple:
     return (rec["family"], rec["source"], rec["case_seed"], rec["kind"])
 
@@ -400,7 +405,8 @@ def with_earlier_peers(rec: dict, earlier: dict, peers) -> dict:
 # ---------------------------------------------------------------------------------------------
 def merged(rec: dict, offset: float, eps: float, *, rivals: bool = True) -> bool:
     """Whether the consensus decision merges the pair with ``offset`` (decades); without
-    ``rivals``, the test alone, before the rival test."""
+    ``rivals``, the test alone, before the rival test (the one-way check, :func:`slides`,
+    still applies: it does not depend on the offset either)."""
     c = rec["consensus"]
     return (c["log10_nfa_model"] is not None and c["log10_nfa_model"] + offset <= math.log10(eps)
             and not (rivals and c["rivals"]) and not slides(rec))
@@ -686,6 +692,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     global CROSS_WALL
     CROSS_WALL = None
+    try:
+        return _main(args, argv)
+    finally:
+        CROSS_WALL = None
+
+
+def _main(args, argv) -> int:
+    global CROSS_WALL
     if args.cross_wall is not None:
         if not (math.isfinite(args.cross_wall) and args.cross_wall >= 0):
             print(f"lowo: --cross-wall is metres >= 0, got {args.cross_wall}", file=sys.stderr)
@@ -698,6 +712,10 @@ def main(argv=None) -> int:
         try:
             draws = {Path(f).stem: json.loads(Path(f).read_text()) for f in args.pooled}
             crops = [r for f in args.crop_records for r in json.loads(Path(f).read_text())]
+            if CROSS_WALL is not None and not _measured([r for d in draws.values() for r in d["pairs"]]):
+                print("lowo: --cross-wall: these records were made before the one-way check and carry no "
+                      "cross_wall_m; give records of the shipped code", file=sys.stderr)
+                return 2
             eps = {d["max_false_merge"] for d in draws.values()}
             if len(eps) != 1:
                 print("lowo: --pooled records were judged at different --max-false-merge; give records of one",
@@ -711,6 +729,10 @@ def main(argv=None) -> int:
     if args.source:
         try:
             data = json.loads(Path(args.source).read_text())
+            if CROSS_WALL is not None and not _measured(data["pairs"]):
+                print(f"lowo: --cross-wall: {args.source} was made before the one-way check and carries no "
+                      "cross_wall_m; give a record of the shipped code", file=sys.stderr)
+                return 2
             print(tables(data))
         except (OSError, ValueError, KeyError, TypeError) as exc:
             print(f"lowo: {args.source}: not a record written by --out ({exc}); give one", file=sys.stderr)
@@ -742,11 +764,18 @@ def main(argv=None) -> int:
         try:
             prev = json.loads(Path(args.peers_from).read_text())
             earlier = {_key(r): r for r in prev["pairs"]}
-            args.peers = list(prev["peers"])
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+            draw = ("seed", "crops", "explore", "drift_cases", "drift", "drift_theta", "repetitive",
+                    "splits", "apart", "negatives", "quick")
+            other = [k for k in draw if prev["settings"].get(k) != vars(args).get(k)]
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             print(f"lowo: --peers-from {args.peers_from}: not a record written by --out ({exc}); give one",
                   file=sys.stderr)
             return 2
+        if other:
+            print(f"lowo: --peers-from {args.peers_from} is of another draw (differing: {', '.join(other)}); "
+                  "give the record of the same --seed and sizes", file=sys.stderr)
+            return 2
+        args.peers = list(prev["peers"])
     if args.quick:
         args.crops, args.explore, args.drift_cases, args.repetitive, args.apart = 1, 1, 1, 1, 0
         args.splits = [2]

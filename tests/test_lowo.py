@@ -177,3 +177,19 @@ def test_peers_taken_from_an_earlier_record_of_the_same_draw(lowo):
     assert got["consensus"]["log10_nfa_model"] == -21.0
     assert got["rival_by"] == "map-merge" and got["resolvable"] is False
     assert "map-merge" not in lowo.with_earlier_peers(other, {lowo._key(earlier): earlier}, ["map-merge"])
+
+
+def test_peers_from_a_record_of_another_draw_is_one_line_and_exit_2(lowo, record, tmp_path, capsys):
+    record["settings"] = {"seed": 3, "crops": 5, "explore": 2, "drift_cases": 2, "drift": 0.01,
+                          "drift_theta": 0.001, "repetitive": 6, "splits": [2, 3, 4], "apart": 1,
+                          "negatives": 1.0, "quick": False}
+    for n, r in enumerate(record["pairs"]):
+        r["case_seed"] = n
+    prev = tmp_path / "prev.json"
+    prev.write_text(json.dumps(record))
+    assert lowo.main(["--seed", "1", "--peers-from", str(prev)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another draw" in err[0] and "seed" in err[0]
+    # and --cross-wall on a record made before the one-way check
+    assert lowo.main(["--from", str(prev), "--cross-wall", "2"]) == 2
+    assert "cross_wall_m" in capsys.readouterr().err

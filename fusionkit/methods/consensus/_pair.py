@@ -59,10 +59,12 @@ class PairResult:
     confidence : float
         ``exp(-nfa)`` (0..1): how sure the test is that the placement is right.
     accepted : bool
-        Whether its number of false alarms is at most ``max_false_merge`` and no distinct
-        placement is nearly as good.
+        Whether its number of false alarms is at most ``max_false_merge``, no distinct
+        placement is nearly as good and its meeting walls fix it in every direction
+        (``ConsensusConfig.cross_wall``).
     ambiguous : bool
-        Whether it passes the test but a distinct rival is nearly as good.
+        Whether it passes the test but a distinct rival is nearly as good (whether or not the
+        best placement slides).
     plausible : tuple of Candidate
         Every distinct candidate that passes the test, best first; for an ambiguous pair
         the best one, its rivals and those.
@@ -345,16 +347,20 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
             plausible.append(c)
     # walls that all run one way hold the placement across them only: slid along them it fits
     # as well, and the wrong placements drawn at random rarely land there (:mod:`._slide`)
-    across = cross_wall(a, b, best.transform)
+    checked = cfg.cross_wall > 0
+    across = cross_wall(a, b, best.transform) if checked else math.inf
     slides = across < cfg.cross_wall
     accepted = significant and not rivals and not slides
     if significant and rivals:
         plausible = [best] + rivals + plausible[1:]
+    # a pair with rivals stays ambiguous, listing them, even when its best placement slides: the
+    # graph may still place one of its options where a loop through a third map confirms it
+    ambiguous = bool(significant and rivals)
     nfa = best.nfa
     confidence = best.confidence
     if accepted:
         reason = ""
-    elif significant and rivals:
+    elif ambiguous:
         reason = (f"ambiguous: {len(rivals) + 1} distinct placements fit about as well "
                   f"({100 * min(r.check.score for r in rivals):.0f}-{100 * best.check.score:.0f}% "
                   "of the walls meet) and the maps alone cannot tell them apart")
@@ -384,7 +390,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                   f"maps reach {100 * null.p0:.0f}%, too few walls for that to be sure "
                   f"(expected false alarms 10^{log_nfa:.1f}, allowed {eps:g})")
     return PairResult(ia, ib, best.transform, float(confidence), bool(accepted),
-                      bool(significant and rivals), tuple(plausible), best, tuple(refined),
+                      ambiguous, tuple(plausible), best, tuple(refined),
                       len(starts), n_hyp, reason, time.perf_counter() - t0,
                       {"rotations": len(rots), "check": best.check.as_dict(),
                        "log10_nfa": log_nfa, "null_p0": null.p0, "null_design": null.design,

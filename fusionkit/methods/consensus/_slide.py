@@ -65,7 +65,10 @@ def _least_spread(p: np.ndarray) -> float:
     syy = (d[..., 1] ** 2).sum(axis=1)
     sxy = (d[..., 0] * d[..., 1]).sum(axis=1)
     keep = count >= NORMAL_LEAST
-    # the major axis of each neighbourhood at angle phi; its normal at phi + 90 degrees
+    # the major axis of each neighbourhood at angle phi; its normal at phi + 90 degrees. A
+    # neighbourhood with no main direction (the inside of a wall 5 or more cells thick, a
+    # filled block) still adds a normal: such walls are counted as running every way (see
+    # ``cross_wall``)
     phi = 0.5 * np.arctan2(2.0 * sxy[keep], sxx[keep] - syy[keep])
     nx, ny = -np.sin(phi), np.cos(phi)
     txx, tyy, txy = float((nx * nx).sum()), float((ny * ny).sum()), float((nx * ny).sum())
@@ -77,7 +80,14 @@ def cross_wall(a: MapIndex, b: MapIndex, t: Transform2D) -> float:
     """Metres of the walls that meet at ``t`` (B -> A) facing the direction the placement is
     least held in: about 0 when they all run one way (the placement slides along them), the
     length of the shorter set of meeting walls when they run two ways. The lesser of B's walls
-    in A and A's walls in B, so the order of the two maps does not matter."""
-    ab = _least_spread(_meeting(a, b, t))
-    ba = _least_spread(_meeting(b, a, t.inverse))
-    return min(ab, ba) * a.resolution
+    in A and A's walls in B, so the order of the two maps does not matter.
+
+    Walls drawn 5 or more cells thick are not measured well: the cells inside them have no
+    direction of their own and count as wall running every way, so a slide along such walls
+    can pass (a corridor of 5-cell walls slid along itself reads about 1.2 m, of 7-cell walls
+    several metres, depending on the grid's heading). Weighing each normal by how line-like
+    its neighbourhood is fixes that but also lowers the measure of the thin, noisy walls of
+    real maps by up to a factor 5, so the threshold would have to be chosen again; not done."""
+    ab = _least_spread(_meeting(a, b, t)) * b.resolution
+    ba = _least_spread(_meeting(b, a, t.inverse)) * a.resolution
+    return min(ab, ba)
