@@ -189,6 +189,11 @@ def test_an_ambiguous_map_lists_its_rival_placements():
     # the true placement is among the rivals
     truth = case.truth[0].inverse @ case.truth[1]
     assert min(t.error_to(truth)[0] for t, _ in p.rivals) < 3 * case.grids[0].resolution
+    # the racks all run one way: every option is flagged as sliding, so no loop through a
+    # third map may place one of them
+    pair = estimate_pair(*case.grids).diagnostics["pair"]
+    assert pair.ambiguous and len(pair.diagnostics["sliding"]) == len(pair.plausible) >= 2
+    assert all(pair.diagnostics["sliding"])
 
 
 def test_a_wrong_placement_far_beyond_chance_but_visibly_worse_is_no_rival():

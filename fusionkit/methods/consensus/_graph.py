@@ -128,6 +128,9 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
     edges = {(p.a, p.b): (p.transform, p.confidence, p.best.rank)
              for p in pairs.values() if p.accepted}
     ambiguous = {(p.a, p.b): p.plausible for p in pairs.values() if p.ambiguous}
+    # options of ambiguous pairs whose meeting walls all run one way: a loop may not place them
+    sliding = {(p.a, p.b): {m for m, s in enumerate(p.diagnostics.get("sliding", ())) if s}
+               for p in pairs.values() if p.ambiguous}
     # witnesses: pairs whose best placement is meaningful (fewer than one false alarm
     # expected, and no distinct placement nearly as good) without reaching the risk accepted;
     # they never place a map, but they may break ties between loops. A pair with a rival is no
@@ -227,7 +230,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                     for m, c in enumerate(cands):
                         if consistent(i, k, j, tik, tkj, c.transform):
                             closing.add(m)
-                if len(closing) == 1:
+                if len(closing) == 1 and not closing <= sliding.get((i, j), set()):
                     m = closing.pop()
                     edges[(i, j)] = (cands[m].transform, cands[m].confidence, cands[m].rank)
                     del ambiguous[(i, j)]

@@ -64,7 +64,8 @@ class PairResult:
         (``ConsensusConfig.cross_wall``).
     ambiguous : bool
         Whether it passes the test but a distinct rival is nearly as good (whether or not the
-        best placement slides).
+        best placement slides; ``diagnostics["sliding"]`` flags the options that slide, which
+        the graph never places).
     plausible : tuple of Candidate
         Every distinct candidate that passes the test, best first; for an ambiguous pair
         the best one, its rivals and those.
@@ -353,9 +354,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     accepted = significant and not rivals and not slides
     if significant and rivals:
         plausible = [best] + rivals + plausible[1:]
-    # a pair with rivals stays ambiguous, listing them, even when its best placement slides: the
-    # graph may still place one of its options where a loop through a third map confirms it
+    # a pair with rivals stays ambiguous, listing them, even when its best placement slides; the
+    # graph never places one of its options that slides (``sliding``, one flag per option)
     ambiguous = bool(significant and rivals)
+    sliding = tuple((c is best and slides) or (checked and c is not best and
+                                               cross_wall(a, b, c.transform) < cfg.cross_wall)
+                    for c in plausible) if ambiguous else ()
     nfa = best.nfa
     confidence = best.confidence
     if accepted:
@@ -395,4 +399,4 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                       {"rotations": len(rots), "check": best.check.as_dict(),
                        "log10_nfa": log_nfa, "null_p0": null.p0, "null_design": null.design,
                        "tests": null.tests, "rivals": len(rivals), "cross_wall_m": across,
-                       "slides": bool(slides)}, nfa, null)
+                       "slides": bool(slides), "sliding": sliding}, nfa, null)
