@@ -43,7 +43,8 @@ BUILDING = {"yujin_office_run1": "yujin_office", "yujin_office_run2": "yujin_off
 
 def draw_pairs(maps_dir: Path, count: int, seed: int) -> list[dict]:
     from fusionkit.methods.peers import crop_pair, placement_error
-    from fusionkit.methods.consensus import ConsensusConfig, estimate_pair
+    from fusionkit.methods.consensus import ConsensusConfig, estimate_pair, prepare_maps
+    from lowo import best_cross_wall
     from fusionkit.errors import FusionkitError
     from fusionkit.mapio import load_map
     cfg = ConsensusConfig()
@@ -70,6 +71,7 @@ def draw_pairs(maps_dir: Path, count: int, seed: int) -> list[dict]:
             pr = estimate_pair(a, b, config=cfg).diagnostics["pair"]
             if pr.best is None or pr.null is None:
                 continue
+            ia, ib = prepare_maps([a, b], config=cfg)
             right = None
             if kind == "pos":
                 d, r = placement_error(pr.best.transform, c.truth, b)
@@ -79,17 +81,16 @@ def draw_pairs(maps_dir: Path, count: int, seed: int) -> list[dict]:
                          "right": right, "ambiguous": bool(pr.ambiguous),
                          "log10_nfa_model": pr.diagnostics["log10_nfa"] - cfg.calibration,
                          "score": pr.best.check.score,
-                         "cross_wall_m": float(pr.diagnostics["cross_wall_m"])})
+                         "cross_wall_m": best_cross_wall(pr, ia, ib)})
             print(json.dumps(rows[-1]), flush=True)
     return rows
 
 
 def refused_anyway(row: dict) -> bool:
     """Refused at every offset: a rival nearly as good (ambiguous), or walls that all run one
-    way (``ConsensusConfig.cross_wall``; rows recorded before that check have no measure)."""
-    from fusionkit.methods.consensus import ConsensusConfig
-    m = row.get("cross_wall_m")
-    return row["ambiguous"] or (m is not None and m < ConsensusConfig().cross_wall)
+    way (``lowo.slides``; rows recorded before that check have no measure)."""
+    from lowo import slides
+    return row["ambiguous"] or slides(row)
 
 
 def merged(row: dict, offset: float) -> bool:

@@ -330,9 +330,9 @@ def run_pair(p: dict, peers, with_peers: bool) -> dict:
         "ambiguous": bool(pr.ambiguous), "accepted": bool(pr.accepted),
         "best": _outcome(best, truth, b) if best is not None else "refused",
         "best_error": _err(best, truth, b),
-        "seconds": round(sec, 4), "reason": pr.reason,
-        "cross_wall_m": (round(float(pr.diagnostics["cross_wall_m"]), 4)
-                         if "cross_wall_m" in pr.diagnostics else None)}
+        "seconds": round(sec, 4), "reason": pr.reason}
+    ia, ib = prepare_maps([a, b], [p["scans_a"], p["scans_b"]], config=cfg, seed=seed)
+    rec["consensus"]["cross_wall_m"] = best_cross_wall(pr, ia, ib)
     placed = {}
     if with_peers:
         for m in peers:
@@ -350,7 +350,6 @@ def run_pair(p: dict, peers, with_peers: bool) -> dict:
                 rec[m] = {"outcome": "refused", "seconds": None, "error": str(exc)}
     if truth is not None:
         # resolvable: no distinct placement found by any method fits at least as well as the truth
-        ia, ib = prepare_maps([a, b], [p["scans_a"], p["scans_b"]], config=cfg, seed=seed)
         box = corners(ib)
         ev_truth = verify(ia, ib, truth).evidence()
         polished = refine_icp(ia, ib.refine_points, truth, gates=DEFAULT_GATES[-2:])
@@ -371,6 +370,19 @@ def run_pair(p: dict, peers, with_peers: bool) -> dict:
         rec["rival_by"] = by
         rec["resolvable"] = bool(rival < ev_truth)
     return rec
+
+
+def best_cross_wall(pr, ia, ib) -> float | None:
+    """``cross_wall_m`` of the pair's best placement (None without one): the estimate's own
+    where it measured it (only at a placement the test takes), measured on the pair's indexes
+    ``ia, ib`` otherwise, as a record is judged again at other offsets."""
+    if pr.best is None:
+        return None
+    m = pr.diagnostics.get("cross_wall_m")
+    if m is None:
+        from fusionkit.methods.consensus._slide import cross_wall
+        m = cross_wall(ia, ib, pr.best.transform)
+    return round(float(m), 4)
 
 
 def _measured(records: list[dict]) -> bool:

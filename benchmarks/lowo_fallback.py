@@ -67,8 +67,7 @@ def run(record: dict, st: dict, maps: str, logs: str, out: Path | None) -> list[
                         "first_model": r["consensus"]["log10_nfa_model"],
                         "model": (lg - cfg.calibration) if math.isfinite(lg) else None,
                         "rivals": int(pr.diagnostics.get("rivals", int(pr.ambiguous))),
-                        "cross_wall_m": (round(float(pr.diagnostics["cross_wall_m"]), 4)
-                                         if "cross_wall_m" in pr.diagnostics else None),
+                        "cross_wall_m": L.best_cross_wall(pr, *mr.indexes),
                         "best": "refused" if best is None else ("wrong" if truth is None
                                                                 else L._outcome(best, truth, p["b"])),
                         "seconds": round(time.perf_counter() - t0, 3),
@@ -84,7 +83,7 @@ def run(record: dict, st: dict, maps: str, logs: str, out: Path | None) -> list[
 
 def merged(r: dict, calibration: float, extra: float, eps: float) -> bool:
     return (r["model"] is not None and r["model"] + calibration + extra <= math.log10(eps)
-            and not r["rivals"] and not L.slides({"consensus": r}))
+            and not r["rivals"] and not L.slides(r))
 
 
 def choose(rows: list[dict], calibration: float, eps: float, margin: float = L.MARGIN) -> float:

@@ -348,9 +348,10 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
             plausible.append(c)
     # walls that all run one way hold the placement across them only: slid along them it fits
     # as well, and the wrong placements drawn at random rarely land there (:mod:`._slide`)
+    # (measured only where it can change the decision: at a placement the test takes)
     checked = cfg.cross_wall > 0
-    across = cross_wall(a, b, best.transform) if checked else math.inf
-    slides = across < cfg.cross_wall
+    across = cross_wall(a, b, best.transform) if checked and significant else None
+    slides = across is not None and across < cfg.cross_wall
     accepted = significant and not rivals and not slides
     if significant and rivals:
         plausible = [best] + rivals + plausible[1:]
