@@ -539,11 +539,12 @@ def test_walls_that_all_run_one_way_do_not_fix_a_placement(resolution):
     assert cross_wall(ib, ia, Transform2D.identity()) == pytest.approx(across)
 
 
-@pytest.mark.parametrize("thickness", [1, 3])
-def test_walls_a_few_cells_thick_that_run_one_way_do_not_fix_a_placement_either(thickness):
-    """Walls drawn 1-3 cells thick (those of the benchmarks' maps), the grid turned off the
-    corridor's axis: a slide along them still finds no wall across. (From 5 cells thick the
-    insides of the walls count as wall running every way: ``cross_wall``'s known limit.)"""
+@pytest.mark.parametrize("thickness", [1, 3, 5, 7])
+def test_thick_walls_that_run_one_way_do_not_fix_a_placement_either(thickness):
+    """Walls drawn 1-7 cells thick, the grid turned off the corridor's axis: a slide along them
+    still finds no wall across (the inside of a thick wall, which has no direction, is not
+    counted as wall running every way), and a wall of the same thickness 1.2 m across the
+    corridor still fixes the placement (a thick wall reads as its two faces)."""
     from fusionkit.methods.consensus._slide import cross_wall
     res, yaw = 0.05, 0.3
     data = np.full((80, 400), UNKNOWN, np.int8)
@@ -554,6 +555,11 @@ def test_walls_a_few_cells_thick_that_run_one_way_do_not_fix_a_placement_either(
     ia, ib = prepare_maps([g, g])
     slid = Transform2D(2.0 * math.cos(yaw), 2.0 * math.sin(yaw), 0.0)       # 2 m along it
     assert cross_wall(ia, ib, slid) < 0.5
+    data = data.copy()
+    data[20:44, 200:200 + thickness] = OCCUPIED                            # 1.2 m across
+    g = OccupancyGrid(data, res, (0.0, 0.0, yaw))
+    ia, ib = prepare_maps([g, g])
+    assert 1.0 <= cross_wall(ia, ib, Transform2D.identity()) <= 2 * 1.2 + 0.2
 
 
 def test_a_map_laid_along_one_straight_wall_of_another_building_is_not_merged():

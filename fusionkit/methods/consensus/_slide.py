@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -29,12 +30,28 @@ NORMAL_LEAST = 4
 _BALL = 29
 
 
+def _surface(b: MapIndex) -> np.ndarray:
+    """Which of B's wall points (``b.points``, one per wall cell in row-major order) lie on a
+    wall's surface: not every one of their eight neighbours is wall. The inside of a wall 3 or
+    more cells thick has no direction of its own (its neighbourhood is a filled block); left out,
+    such a wall reads as its two faces, which run the way the wall does (kept in B's
+    ``cache``)."""
+    got = b.cache.get("surface")
+    if got is None:
+        occ = b.occupied.astype(np.uint8)
+        # (beyond the grid's edge counts as wall: a wall the edge cuts has no end there)
+        inside = cv2.erode(occ, np.ones((3, 3), np.uint8)).astype(bool)
+        got = b.cache["surface"] = ~inside[b.occupied]
+    return got
+
+
 def _meeting(a: MapIndex, b: MapIndex, t: Transform2D) -> np.ndarray:
-    """B's wall cells (in A's cell units) that land beside A's walls at ``t`` (B -> A)."""
+    """B's wall cells on a wall's surface (in A's cell units) that land beside A's walls at
+    ``t`` (B -> A)."""
     if len(b.points) == 0:
         return np.zeros((0, 2))
     cx, cy, cth = _to_cells(a, t)
-    pts = _in_cells(b, b.points, a.resolution)
+    pts = _in_cells(b, b.points, a.resolution)[_surface(b)]
     c, s = math.cos(cth), math.sin(cth)
     x = c * pts[:, 0] - s * pts[:, 1] + cx
     y = s * pts[:, 0] + c * pts[:, 1] + cy
@@ -65,10 +82,8 @@ def _least_spread(p: np.ndarray) -> float:
     syy = (d[..., 1] ** 2).sum(axis=1)
     sxy = (d[..., 0] * d[..., 1]).sum(axis=1)
     keep = count >= NORMAL_LEAST
-    # the major axis of each neighbourhood at angle phi; its normal at phi + 90 degrees. A
-    # neighbourhood with no main direction (the inside of a wall 5 or more cells thick, a
-    # filled block) still adds a normal: such walls are counted as running every way (see
-    # ``cross_wall``)
+    # the major axis of each neighbourhood at angle phi; its normal at phi + 90 degrees (the
+    # insides of thick walls, which have none, are not among ``p``: :func:`_surface`)
     phi = 0.5 * np.arctan2(2.0 * sxy[keep], sxx[keep] - syy[keep])
     nx, ny = -np.sin(phi), np.cos(phi)
     txx, tyy, txy = float((nx * nx).sum()), float((ny * ny).sum()), float((nx * ny).sum())
@@ -82,12 +97,10 @@ def cross_wall(a: MapIndex, b: MapIndex, t: Transform2D) -> float:
     length of the shorter set of meeting walls when they run two ways. The lesser of B's walls
     in A and A's walls in B, so the order of the two maps does not matter.
 
-    Walls drawn 5 or more cells thick are not measured well: the cells inside them have no
-    direction of their own and count as wall running every way, so a slide along such walls
-    can pass (a corridor of 5-cell walls slid along itself reads about 1.2 m, of 7-cell walls
-    several metres, depending on the grid's heading). Weighing each normal by how line-like
-    its neighbourhood is fixes that but also lowers the measure of the thin, noisy walls of
-    real maps by up to a factor 5, so the threshold would have to be chosen again; not done."""
+    Only the cells on a wall's surface count (:func:`_surface`): the inside of a thick wall has
+    no direction and would count as wall running every way, so that a slide along walls drawn 5
+    or more cells thick would pass. A wall 1-2 cells thick is all surface and reads its length;
+    a thicker one reads about the length of its two faces."""
     ab = _least_spread(_meeting(a, b, t)) * b.resolution
     ba = _least_spread(_meeting(b, a, t.inverse)) * a.resolution
     return min(ab, ba)
