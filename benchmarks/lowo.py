@@ -683,7 +683,8 @@ def main(argv=None) -> int:
                     help="simulated runs per world (each without and with drift) whose robots that "
                          "never met are the negatives within one building")
     ap.add_argument("--negatives", type=float, default=1.0, help="negatives per positive, per family")
-    ap.add_argument("--peers", nargs="*", default=list(PEERS))
+    ap.add_argument("--peers", nargs="*", default=None,
+                    help=f"peers run on the same pairs (default: {' '.join(PEERS)}; none: --peers alone)")
     ap.add_argument("--peers-on-negatives", action="store_true", help="run the peers on the negatives too")
     ap.add_argument("--peers-from", default=None, metavar="RECORD",
                     help="take the peers' results from this earlier record of the same draw "
@@ -757,6 +758,11 @@ def _main(args, argv) -> int:
     from fusionkit.methods.consensus import ConsensusConfig
     cfg = ConsensusConfig()
     eps = args.max_false_merge if args.max_false_merge is not None else cfg.max_false_merge
+    if args.peers_from and args.peers is not None:
+        print("lowo: --peers-from takes the peers of its record; give it without --peers", file=sys.stderr)
+        return 2
+    if args.peers is None:
+        args.peers = list(PEERS)
     bad = [m for m in args.peers if m not in METHODS or m == "consensus"]
     if bad:
         print(f"lowo: unknown peer {bad[0]!r}; choose from {', '.join(m for m in METHODS if m != 'consensus')}",

@@ -191,9 +191,15 @@ def test_an_ambiguous_map_lists_its_rival_placements():
     assert min(t.error_to(truth)[0] for t, _ in p.rivals) < 3 * case.grids[0].resolution
     # the racks all run one way: every option is flagged as sliding, so no loop through a
     # third map may place one of them
-    pair = estimate_pair(*case.grids).diagnostics["pair"]
+    est = estimate_pair(*case.grids)
+    pair = est.diagnostics["pair"]
     assert pair.ambiguous and len(pair.diagnostics["sliding"]) == len(pair.plausible) >= 2
     assert all(pair.diagnostics["sliding"])
+    # nothing tells the best of k + 1 options from the others: the pair's confidence says so
+    k = pair.diagnostics["rivals"]
+    assert pair.best.confidence > 0.99 and not est.accepted
+    assert est.confidence == pytest.approx(pair.best.confidence / (k + 1))
+    assert est.candidates[0][1] == est.confidence
 
 
 def test_a_wrong_placement_far_beyond_chance_but_visibly_worse_is_no_rival():
@@ -581,6 +587,8 @@ def test_a_map_laid_along_one_straight_wall_of_another_building_is_not_merged():
     assert pr.diagnostics["log10_nfa"] < -10 and not pr.ambiguous
     assert not est.accepted and "may slide" in pr.reason
     assert pr.diagnostics["cross_wall_m"] < 0.1
+    # slid along the wall it fits as well: the method is not sure of this placement at all
+    assert est.confidence == 0.0 and pr.best.confidence > 0.99
     unchecked = estimate_pair(*maps, scans_a=scans[0], scans_b=scans[1], seed=9334,
                               config=ConsensusConfig(cross_wall=0.0))
     assert unchecked.accepted

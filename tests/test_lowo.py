@@ -190,6 +190,10 @@ def test_peers_from_a_record_of_another_draw_is_one_line_and_exit_2(lowo, record
     assert lowo.main(["--seed", "1", "--peers-from", str(prev)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "another draw" in err[0] and "seed" in err[0]
+    # the record's peers are the ones compared: --peers beside it would be silently replaced
+    assert lowo.main(["--seed", "3", "--peers", "map-merge", "--peers-from", str(prev)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "without --peers" in err[0]
     # and --cross-wall on a record made before the one-way check
     assert lowo.main(["--from", str(prev), "--cross-wall", "2"]) == 2
     assert "cross_wall_m" in capsys.readouterr().err

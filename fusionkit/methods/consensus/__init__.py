@@ -102,9 +102,11 @@ def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None
     Returns
     -------
     fusionkit.methods.peers.PairEstimate
-        ``transform`` maps b's frame into a's (m, rad), ``confidence`` is ``exp(-nfa)`` of
-        the test (0..1), ``accepted`` whether it passed; ``candidates`` lists every distinct
-        placement that passed it; ``diagnostics["pair"]`` is the :class:`PairResult`.
+        ``transform`` maps b's frame into a's (m, rad), ``confidence`` how sure the method
+        is of it (0..1; :attr:`PairResult.confidence`), ``accepted`` whether it passed;
+        ``candidates`` lists every distinct placement that passed the test, each with that
+        confidence (the best one with the pair's); ``diagnostics["pair"]`` is the
+        :class:`PairResult`.
     """
     from ..peers import PairEstimate
     t0 = time.perf_counter()
@@ -113,7 +115,8 @@ def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None
                           hist_b=orientation_histogram(ib),
                           evidence_a=evidence_raster(ia, coarse=config.coarse, max_side=config.coarse_side), seed=seed)
     return PairEstimate(pr.transform, pr.confidence, pr.accepted,
-                        tuple((c.transform, c.confidence) for c in pr.plausible) or
+                        tuple((c.transform, pr.confidence if c is pr.best else c.confidence)
+                              for c in pr.plausible) or
                         (((pr.transform, pr.confidence),) if pr.transform is not None else ()),
                         METHOD, time.perf_counter() - t0, {"pair": pr, "reason": pr.reason})
 

@@ -57,7 +57,10 @@ class PairResult:
     transform : Transform2D or None
         The best verified placement (None when no candidate came out at all).
     confidence : float
-        ``exp(-nfa)`` (0..1): how sure the test is that the placement is right.
+        How sure the method is that the placement is right (0..1): ``exp(-nfa)`` of the test,
+        divided by the number of placements that fit about as well when the pair is ambiguous,
+        and 0 when it may slide (``diagnostics["slides"]``); each candidate keeps the test's own
+        (:attr:`Candidate.confidence`).
     accepted : bool
         Whether its number of false alarms is at most ``max_false_merge``, no distinct
         placement is nearly as good and its meeting walls fix it in every direction
@@ -362,7 +365,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                                                cross_wall(a, b, c.transform) < cfg.cross_wall)
                     for c in plausible) if ambiguous else ()
     nfa = best.nfa
-    confidence = best.confidence
+    # how sure the method is that the best placement is right: the test's confidence, less
+    # what the checks after it showed. Of k + 1 placements that fit about as well, nothing
+    # tells the best one from the others; slid along walls that all run one way, it fits as
+    # well at any shift
+    confidence = (0.0 if slides and not ambiguous
+                  else best.confidence / (len(rivals) + 1) if ambiguous else best.confidence)
     if accepted:
         reason = ""
     elif ambiguous:
