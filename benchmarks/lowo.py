@@ -635,13 +635,16 @@ def tables(data: dict) -> str:
     lines.append("")
     lines.append("| method | median s / pair | ratio of the medians to map-merge | median of the per-pair ratios |")
     lines.append("|---|---|---|---|")
-    methods = ["consensus"] + peers
+    # peers taken from an earlier record (--peers-from) ran in another process, at another load:
+    # their seconds are not compared with this run's
+    other_run = bool(data.get("settings", {}).get("peers_from"))
+    methods = ["consensus"] + ([] if other_run else peers)
     timed = [r for r in pos if all(m in r and r[m].get("seconds") is not None for m in methods)]
 
     def secs(r, m):
         return r[m]["seconds"]
     if timed:
-        ref = "map-merge" if "map-merge" in peers else None
+        ref = "map-merge" if "map-merge" in methods else None
         for m in methods:
             med = statistics.median(secs(r, m) for r in timed)
             if ref:
@@ -651,7 +654,9 @@ def tables(data: dict) -> str:
             else:
                 lines.append(f"| {m} | {med:.3f} | | |")
         lines.append("")
-        lines.append(f"({len(timed)} positives on which every method ran.)")
+        lines.append(f"({len(timed)} positives on which every method ran"
+                     + (f"; the peers' seconds are of the run of {data['settings']['peers_from']}, "
+                        "not compared)" if other_run and peers else ".)"))
     unres = [r for r in pos if not r.get("resolvable")]
     if unres:
         lines.append("")

@@ -82,6 +82,16 @@ def test_tables_redone_from_a_record(lowo, record, tmp_path, capsys):
     assert rows["**all**"].split("|")[3].strip() == "3 / 6"
     # the stricter choice on the test alone is tabled too
     assert "passes the test alone" in text and "in sample 49.25" in text
+    # the time per pair: 0.2 s against map-merge's 0.1 s in the same run
+    assert rows["consensus"].split("|")[2:4] == [" 0.200 ", " 2.00x "]
+    # peers taken from an earlier record ran in another process: their seconds are not compared
+    record["settings"] = {"peers_from": "earlier.json"}
+    path.write_text(json.dumps(record))
+    assert lowo.main(["--from", str(path)]) == 0
+    text = capsys.readouterr().out
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    assert rows["consensus"].split("|")[2:4] == [" 0.200 ", " "] and "not compared" in text
+    assert "| map-merge | 0.100" not in text
 
 
 def test_a_record_it_cannot_read_is_one_line_and_exit_2(lowo, tmp_path, capsys):
