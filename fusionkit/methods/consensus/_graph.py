@@ -312,7 +312,9 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
             reasons.append("its confident links reach other maps but none of them links to the "
                            "reference map")
         else:
-            best = max(mine, key=lambda p: p.confidence, default=None)
+            # the reason of the pair the test found surest (its confidence may have been
+            # lowered since: a placement that may slide)
+            best = min(mine, key=lambda p: p.nfa, default=None)
             reasons.append(best.reason if best is not None and best.reason else
                            "no confident placement against any other map")
     return GraphResult(tuple(transforms), tuple(float(c) for c in conf), tuple(tree),
