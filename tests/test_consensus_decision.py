@@ -596,3 +596,27 @@ def test_a_map_laid_along_one_straight_wall_of_another_building_is_not_merged():
     assert not shipped.placements[1].merged
     with pytest.raises(InputError, match="cross_wall"):
         ConsensusConfig(cross_wall=-1.0)
+
+
+def test_a_map_left_out_because_it_may_slide_says_so_among_other_pairs():
+    """The warehouse window and the office exploration laid along one straight wall, merged
+    with a third map, a small room, as the reference. Each of the two is left out; the reason
+    given is that of its pair the test found surest, the slide (whose confidence is 0), not
+    that of a pair with the room that is merely unsure."""
+    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
+
+    def case(world, mode, n, seed):
+        return make_case(CaseSpec(n, WorldSpec(world, builtin=world), mode, 2, seed),
+                         BenchConfig(methods=("consensus",), modes=(mode,), robots=(2,), cases=1,
+                                     seed=6))
+    rack, room = case("warehouse", "crop", 4, 1210742165), case("office", "explore", 5, 638456830)
+    data = np.full((60, 80), UNKNOWN, np.int8)
+    data[10:50, 10:70] = FREE
+    data[10, 10:70] = data[49, 10:70] = data[10:50, 10] = data[10:50, 69] = OCCUPIED
+    data[25:35, 30:33] = OCCUPIED
+    box = OccupancyGrid(data, rack.grids[0].resolution, (0.0, 0.0, 0.0))
+    out = merge([box, rack.grids[0], room.grids[1]],
+                config=MergeConfig(method="consensus", seed=9334))
+    for p in out.placements[1:]:
+        assert not p.merged and p.confidence == 0.0
+        assert p.reason.startswith("the placement may slide"), p.reason
