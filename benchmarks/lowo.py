@@ -78,6 +78,7 @@ each kind, K = 2, no ``apart`` runs, spectral-pso left out: 40 pairs in about 80
 from __future__ import annotations
 
 import argparse
+import functools
 import itertools
 import json
 import math
@@ -429,11 +430,17 @@ def slides(rec: dict, least: float | None = None) -> bool:
     its walls (``cross_wall_m`` under ``least``, the shipped ``ConsensusConfig.cross_wall`` by
     default): ``rec`` a record of ``--out`` or of ``benchmarks/calibrate_consensus.py --out``;
     records made before the check have no measure and never slide."""
-    from fusionkit.methods.consensus import ConsensusConfig
     m = rec.get("consensus", rec).get("cross_wall_m")
     if least is None:
-        least = ConsensusConfig().cross_wall if CROSS_WALL is None else CROSS_WALL
+        least = _shipped_cross_wall() if CROSS_WALL is None else CROSS_WALL
     return m is not None and m < least
+
+
+@functools.cache
+def _shipped_cross_wall() -> float:
+    """``ConsensusConfig().cross_wall``, read once (the tables ask for it per pair and offset)."""
+    from fusionkit.methods.consensus import ConsensusConfig
+    return ConsensusConfig().cross_wall
 
 
 def least_offset(merges, margin: float = MARGIN, least: float = -math.inf) -> float:
