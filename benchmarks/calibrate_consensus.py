@@ -81,7 +81,9 @@ def draw_pairs(maps_dir: Path, count: int, seed: int) -> list[dict]:
                          "right": right, "ambiguous": bool(pr.ambiguous),
                          "log10_nfa_model": pr.diagnostics["log10_nfa"] - cfg.calibration,
                          "score": pr.best.check.score,
-                         "cross_wall_m": best_cross_wall(pr, ia, ib)})
+                         "cross_wall_m": best_cross_wall(pr, ia, ib),
+                         "best_transform": [pr.best.transform.x, pr.best.transform.y,
+                                            pr.best.transform.theta]})
             print(json.dumps(rows[-1]), flush=True)
     return rows
 

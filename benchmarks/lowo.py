@@ -331,6 +331,7 @@ def run_pair(p: dict, peers, with_peers: bool) -> dict:
         "ambiguous": bool(pr.ambiguous), "accepted": bool(pr.accepted),
         "best": _outcome(best, truth, b) if best is not None else "refused",
         "best_error": _err(best, truth, b),
+        "best_transform": [best.x, best.y, best.theta] if best is not None else None,
         "seconds": round(sec, 4), "reason": pr.reason}
     ia, ib = prepare_maps([a, b], [p["scans_a"], p["scans_b"]], config=cfg, seed=seed)
     rec["consensus"]["cross_wall_m"] = best_cross_wall(pr, ia, ib)

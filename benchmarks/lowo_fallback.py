@@ -68,6 +68,7 @@ def run(record: dict, st: dict, maps: str, logs: str, out: Path | None) -> list[
                         "model": (lg - cfg.calibration) if math.isfinite(lg) else None,
                         "rivals": int(pr.diagnostics.get("rivals", int(pr.ambiguous))),
                         "cross_wall_m": L.best_cross_wall(pr, *mr.indexes),
+                        "best_transform": None if best is None else [best.x, best.y, best.theta],
                         "best": "refused" if best is None else ("wrong" if truth is None
                                                                 else L._outcome(best, truth, p["b"])),
                         "seconds": round(time.perf_counter() - t0, 3),

@@ -568,6 +568,29 @@ def test_thick_walls_that_run_one_way_do_not_fix_a_placement_either(thickness):
     assert 1.0 <= cross_wall(ia, ib, Transform2D.identity()) <= 2 * 1.2 + 0.2
 
 
+@pytest.mark.parametrize("yaw", [0.0, 0.3, 1.0])
+def test_square_pillars_hold_a_placement_both_ways_whatever_the_map_s_turn(yaw):
+    """The square pillars of a hall (2 x 2 cells, nothing else within 3 cells) have no direction
+    of their own: each of their cells faces every way, half a cell each way, so twelve pillars
+    meeting at a placement hold it 12 x 4 x 0.5 cells both ways. Whether a cell has a direction
+    is read in integers on its own grid, not decided by rounding: the measure is the same at
+    any turn of the map's frame and for its mirror image."""
+    from fusionkit.methods.consensus._slide import cross_wall
+
+    def hall(flip):
+        data = np.full((120, 200), UNKNOWN, np.int8)
+        data[10:110, 10:190] = FREE
+        for r in (30, 60, 90):
+            for c in (40, 80, 120, 160):
+                data[r:r + 2, c:c + 2] = OCCUPIED
+        return OccupancyGrid(data[::-1].copy() if flip else data, 0.05, (0.0, 0.0, yaw))
+
+    for flip in (False, True):
+        ia, ib = prepare_maps([hall(flip), hall(flip)])
+        assert cross_wall(ia, ib, Transform2D.identity()) == pytest.approx(12 * 4 * 0.5 * 0.05,
+                                                                           abs=1e-12)
+
+
 def test_a_map_laid_along_one_straight_wall_of_another_building_is_not_merged():
     """A window of the warehouse against an exploration of the office (two buildings: every
     placement is wrong). The best placement lays the racks' straight edge along a straight

@@ -14,7 +14,6 @@ import math
 
 import cv2
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ...transform import Transform2D
 from ._index import MapIndex
@@ -23,11 +22,17 @@ from ._verify import _in_cells, _states, _to_cells
 __all__ = ["cross_wall"]
 
 #: Radius (cells) of the neighbourhood a wall cell's direction is read from.
-NORMAL_RADIUS = 3.0
+NORMAL_RADIUS = 3
 #: Neighbours (itself included) a wall cell needs for a direction: fewer is a speck.
 NORMAL_LEAST = 4
-#: The most cells within ``NORMAL_RADIUS`` (lattice points of a disc of radius 3).
-_BALL = 29
+#: The cell offsets ``(drow, dcol)`` within ``NORMAL_RADIUS`` (29 lattice points of a disc) and,
+#: per offset, the moments summed over a neighbourhood: ``1, dc, dr, dc^2, dr^2, dc dr``.
+_OFFSETS = np.array([(dr, dc) for dr in range(-NORMAL_RADIUS, NORMAL_RADIUS + 1)
+                     for dc in range(-NORMAL_RADIUS, NORMAL_RADIUS + 1)
+                     if dr * dr + dc * dc <= NORMAL_RADIUS * NORMAL_RADIUS], np.int64)
+_MOMENTS = np.column_stack([np.ones(len(_OFFSETS)), _OFFSETS[:, 1], _OFFSETS[:, 0],
+                            _OFFSETS[:, 1] ** 2, _OFFSETS[:, 0] ** 2,
+                            _OFFSETS[:, 1] * _OFFSETS[:, 0]]).astype(np.float64)
 
 
 def _surface(b: MapIndex) -> np.ndarray:
@@ -45,12 +50,22 @@ def _surface(b: MapIndex) -> np.ndarray:
     return got
 
 
+def _surface_cells(b: MapIndex) -> np.ndarray:
+    """``(row, col)`` (int64) of B's wall cells on a wall's surface, in the order of ``b.points``
+    (kept in B's ``cache``)."""
+    got = b.cache.get("surface cells")
+    if got is None:
+        got = b.cache["surface cells"] = np.argwhere(b.occupied)[_surface(b)]
+    return got
+
+
 def _meeting(a: MapIndex, b: MapIndex, t: Transform2D) -> np.ndarray:
-    """B's wall cells on a wall's surface (in A's cell units) that land beside A's walls at
-    ``t`` (B -> A)."""
+    """``(row, col)`` in B's grid of B's wall cells on a wall's surface that land beside A's
+    walls at ``t`` (B -> A)."""
     if len(b.points) == 0:
-        return np.zeros((0, 2))
+        return np.zeros((0, 2), np.int64)
     cx, cy, cth = _to_cells(a, t)
+    rc = _surface_cells(b)
     pts = _in_cells(b, b.points, a.resolution)[_surface(b)]
     c, s = math.cos(cth), math.sin(cth)
     x = c * pts[:, 0] - s * pts[:, 1] + cx
@@ -60,35 +75,47 @@ def _meeting(a: MapIndex, b: MapIndex, t: Transform2D) -> np.ndarray:
     inside = (row >= 0) & (row < st.shape[0]) & (col >= 0) & (col < st.shape[1])
     meet = np.zeros(len(x), bool)
     meet[inside] = (st[row[inside], col[inside]] & 1) > 0
-    return np.column_stack([x[meet], y[meet]])
+    return rc[meet]
 
 
-def _least_spread(p: np.ndarray) -> float:
-    """For wall cells ``p`` (cells): the smaller eigenvalue of the sum of ``n n^T`` over their
-    local normals ``n`` (each the direction across the cells within ``NORMAL_RADIUS``): how many
-    cells of wall face the direction they hold least."""
-    if len(p) < NORMAL_LEAST:
+def _least_spread(cells: np.ndarray) -> float:
+    """For wall cells ``cells`` (``(row, col)`` of one grid): the smaller eigenvalue of the sum
+    of ``n n^T`` over their local normals ``n`` (each the direction across the cells of
+    ``cells`` within ``NORMAL_RADIUS``): how many cells of wall face the direction they hold
+    least.
+
+    A cell's neighbourhood is read on the grid, in integers: its scatter (times the count) is
+    exact, so whether it has a main direction at all does not depend on rounding. One that has
+    none (a square pillar, a crossing: the scatter is the same every way) faces every way,
+    half a cell each way. With each normal at angle ``psi`` written as the unit vector at
+    ``2 psi`` (``u, v``; zero for those), the sum of ``n n^T`` has eigenvalues
+    ``(m -+ |sum (u, v)|) / 2`` for ``m`` cells; the sums are exactly rounded
+    (:func:`math.fsum`), so the measure is the same on any machine."""
+    if len(cells) < NORMAL_LEAST:
         return 0.0
-    k = min(_BALL, len(p))
-    dist, idx = cKDTree(p).query(p, k=k, distance_upper_bound=NORMAL_RADIUS + 1e-9)
-    dist, idx = dist.reshape(len(p), k), idx.reshape(len(p), k)
-    used = np.isfinite(dist)
-    count = used.sum(axis=1)
-    nb = p[np.where(used, idx, 0)]                                   # (N, k, 2)
-    w = used[..., None]
-    mean = (nb * w).sum(axis=1) / count[:, None]
-    d = (nb - mean[:, None, :]) * w
-    sxx = (d[..., 0] ** 2).sum(axis=1)
-    syy = (d[..., 1] ** 2).sum(axis=1)
-    sxy = (d[..., 0] * d[..., 1]).sum(axis=1)
-    keep = count >= NORMAL_LEAST
-    # the major axis of each neighbourhood at angle phi; its normal at phi + 90 degrees (the
-    # insides of thick walls, which have none, are not among ``p``: :func:`_surface`)
-    phi = 0.5 * np.arctan2(2.0 * sxy[keep], sxx[keep] - syy[keep])
-    nx, ny = -np.sin(phi), np.cos(phi)
-    txx, tyy, txy = float((nx * nx).sum()), float((ny * ny).sum()), float((nx * ny).sum())
-    half = 0.5 * (txx + tyy)
-    return max(0.0, half - math.sqrt(max(0.0, 0.25 * (txx - tyy) ** 2 + txy ** 2)))
+    lo = cells.min(axis=0) - NORMAL_RADIUS
+    rows, cols = (cells.max(axis=0) - lo + NORMAL_RADIUS + 1).tolist()
+    r, c = cells[:, 0] - lo[0], cells[:, 1] - lo[1]
+    img = np.zeros(rows * cols, np.uint8)
+    img[r * cols + c] = 1
+    # which of the 29 neighbours are wall, then each neighbourhood's moments: sums of small
+    # integers, exact in floating point in any order
+    flat = (r * cols + c)[:, None] + (_OFFSETS[:, 0] * cols + _OFFSETS[:, 1])[None, :]
+    near = img[flat].astype(np.float64)
+    n, sx, sy, sxx, syy, sxy = (near @ _MOMENTS).T
+    keep = n >= NORMAL_LEAST
+    n, sx, sy, sxx, syy, sxy = (m[keep] for m in (n, sx, sy, sxx, syy, sxy))
+    # the scatter times the count (exact): its anisotropy (a, b) is (cos, sin) of twice the
+    # major axis' angle, times its size; the normal is at 90 degrees from the axis
+    a = (n * sxx - sx * sx) - (n * syy - sy * sy)
+    b = 2.0 * (n * sxy - sx * sy)
+    size = np.sqrt(a * a + b * b)
+    some = size > 0
+    u = np.zeros(len(n))
+    v = np.zeros(len(n))
+    u[some], v[some] = -a[some] / size[some], -b[some] / size[some]
+    m = len(n)
+    return max(0.0, 0.5 * (m - math.hypot(math.fsum(u.tolist()), math.fsum(v.tolist()))))
 
 
 def cross_wall(a: MapIndex, b: MapIndex, t: Transform2D) -> float:
