@@ -410,6 +410,25 @@ def test_a_placement_that_contradicts_more_wall_than_it_explains_carries_no_evid
     assert null.nfa(clean) <= ConsensusConfig().max_false_merge
 
 
+
+def test_maps_laid_side_by_side_are_no_placement_of_them():
+    """Windows of two buildings (the MIT basement and the Yujin office) where every placement
+    laying one over the other misses more wall than it meets. One laying them side by side puts
+    no wall of either where the other is known: it misses nothing and meets nothing, so it would
+    outrank them all, and nothing tells it from any other such placement (which one a search
+    meets first can change with the machine's rounding). It is no placement of the two maps:
+    the best is one over the other, and the refusal says what it shows."""
+    basement, office = load_map(REAL / "mit_stata_basement.yaml"), load_map(REAL / "yujin_office_run1.yaml")
+    rng = np.random.default_rng(2)
+    a = crop_pair(basement, rng, size=150, min_overlap=0.15).a
+    b = crop_pair(office, rng, size=150, min_overlap=0.15).b
+    est = estimate_pair(a, b)
+    pr = est.diagnostics["pair"]
+    assert not est.accepted
+    assert pr.refined and all(c.check.agreeing + c.check.disagreeing > 0 for c in pr.refined)
+    assert pr.best.check.disagreeing > 0
+    assert pr.reason.startswith("best placement") and "but 0 wall cells miss" not in pr.reason
+
 def test_sessions_placed_through_a_middle_one_are_not_cut_apart(tmp_path):
     """The Edmonton log split into three sessions: the first and the third share only the
     edges of their areas, where each knows little of the other's rooms. Placed through the

@@ -173,6 +173,10 @@ def cluster_hypotheses(h: Hypotheses, *, radius: float = 0.75, angle: float = ma
         if centre is not None:
             cc, ss = math.cos(th), math.sin(th)
             xy = xy - np.array([cc * centre[0] - ss * centre[1], ss * centre[0] + cc * centre[1]])
-        out.append(Cluster(Transform2D(float(xy[0]), float(xy[1]), th), float(support[i]), len(members)))
+        # numpy's vector sines and cosines round by the CPU's instruction set: the centre is
+        # snapped to a micrometre and a tenth of a microradian, so that the same scans give the
+        # same starts on any machine
+        out.append(Cluster(Transform2D(round(float(xy[0]), 6), round(float(xy[1]), 6), round(th, 7)),
+                           float(support[i]), len(members)))
         alive[tree.query_ball_point(emb[i], 2 * radius)] = False
     return out

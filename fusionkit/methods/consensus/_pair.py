@@ -46,6 +46,16 @@ class Candidate:
         return math.exp(-self.nfa) if math.isfinite(self.nfa) else 0.0
 
 
+def _order(c: Candidate) -> tuple:
+    """Sort key, best first: by evidence; placements of equal evidence by more meeting walls,
+    then fewer on open floor, then by where they lie (rounded far beyond the search's
+    precision). Ties then do not fall to the order the search found them in, which the rounding
+    of floating point (numpy's vector functions are chosen by CPU) can change between machines."""
+    t = c.transform
+    return (-c.rank, -c.check.agreeing, c.check.conflicts,
+            round(t.theta, 6), round(t.x, 4), round(t.y, 4))
+
+
 @dataclass(frozen=True, eq=False)
 class PairResult:
     """What the consensus method concluded about maps ``a`` and ``b``.
@@ -234,11 +244,16 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         if kept.near(t, 2 * res):
             return
         kept.add(t)
-        refined.append(Candidate(t, verify_memo(memo, a, b, t), source))
+        chk = verify_memo(memo, a, b, t)
+        if chk.agreeing + chk.disagreeing == 0:
+            # no wall of either map lands where the other is known: the maps are side by side,
+            # not over each other, and nothing tells such a placement from any other
+            return
+        refined.append(Candidate(t, chk, source))
 
     for start, source in starts:
         refine(start, source)
-    refined.sort(key=lambda c: -c.rank)
+    refined.sort(key=_order)
     if refined and cfg.alias_peaks and refined[0].rank > 0:
         # repeated structure (racks, rooms along a corridor) fits B in several places at the
         # same rotation; the rotation search keeps only a few translations per rotation, so
@@ -248,11 +263,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         for start, _ in translations(best_t.theta, cfg.alias_peaks,
                                      2 * cfg.distinct_cells * res):
             refine(start, "aliases", gates=DEFAULT_GATES[1:-2])
-        refined.sort(key=lambda c: -c.rank)
+        refined.sort(key=_order)
     seconds = time.perf_counter() - t0
     if not refined:
-        return PairResult(ia, ib, None, 0.0, False, False, reason="no candidate placement found",
-                          seconds=seconds, hypotheses=n_hyp)
+        return PairResult(ia, ib, None, 0.0, False, False,
+                          reason="no placement found that lays either map's walls where the other "
+                                 "map is known", seconds=seconds, hypotheses=n_hyp)
     best = refined[0]
     distinct = cfg.distinct_cells * res
     rng = np.random.default_rng([seed, ia, ib])
@@ -277,7 +293,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
             chk = verify(a, b, t)
             if chk.evidence() > c.rank:
                 refined[k] = Candidate(t, chk, c.source)
-        refined.sort(key=lambda c: -c.rank)
+        refined.sort(key=_order)
         best = refined[0]
     if cfg.use_scans and len(a.cloud) and len(b.cloud):
         # recorded scans do not quantise walls to cells: pin the best placement down on them
@@ -335,7 +351,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     # can use are measured: with evidence (a rival) or passing the test (plausible)
     others = [c for c in others if (c.rank > 0 or c.nfa <= eps)
               and typical_move(c.transform, best.transform, thin) > distinct]
-    others.sort(key=lambda c: -c.rank)
+    others.sort(key=_order)
     rivals: list[Candidate] = []
     # a rival is judged by its share of meeting walls alone: one that misses too much to be
     # evidence of itself still shows that the maps fit elsewhere nearly as well
