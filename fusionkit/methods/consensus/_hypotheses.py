@@ -174,8 +174,8 @@ def cluster_hypotheses(h: Hypotheses, *, radius: float = 0.75, angle: float = ma
             cc, ss = math.cos(th), math.sin(th)
             xy = xy - np.array([cc * centre[0] - ss * centre[1], ss * centre[0] + cc * centre[1]])
         # numpy's vector sines and cosines round by the CPU's instruction set: the centre is
-        # snapped to a micrometre and a tenth of a microradian, so that the same scans give the
-        # same starts on any machine
+        # snapped to a micrometre and a tenth of a microradian, so that differences that small
+        # (1e-10 rad seen) rarely move the start the same scans give
         out.append(Cluster(Transform2D(round(float(xy[0]), 6), round(float(xy[1]), 6), round(th, 7)),
                            float(support[i]), len(members)))
         alive[tree.query_ball_point(emb[i], 2 * radius)] = False
