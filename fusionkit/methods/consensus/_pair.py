@@ -56,6 +56,13 @@ def _order(c: Candidate) -> tuple:
             round(t.theta, 6), round(t.x, 4), round(t.y, 4))
 
 
+def _side_by_side(chk: Check) -> bool:
+    """Whether no wall of either map lands where the other is known under the placement checked:
+    the maps lie side by side, not over each other. Such a placement meets nothing and misses
+    nothing, and nothing tells it from any other: it is no candidate."""
+    return chk.agreeing + chk.disagreeing == 0
+
+
 @dataclass(frozen=True, eq=False)
 class PairResult:
     """What the consensus method concluded about maps ``a`` and ``b``.
@@ -245,9 +252,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
             return
         kept.add(t)
         chk = verify_memo(memo, a, b, t)
-        if chk.agreeing + chk.disagreeing == 0:
-            # no wall of either map lands where the other is known: the maps are side by side,
-            # not over each other, and nothing tells such a placement from any other
+        if _side_by_side(chk):
             return
         refined.append(Candidate(t, chk, source))
 
@@ -304,7 +309,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         t = memo[key]
         if displacement(t, best.transform, box) <= cfg.cloud_shift * res:
             chk = verify_memo(memo, a, b, t)
-            if chk.evidence() >= 0.9 * best.rank:
+            if chk.evidence() >= 0.9 * best.rank and not _side_by_side(chk):
                 best = Candidate(t, chk, best.source)
                 refined[0] = best
 
