@@ -410,7 +410,6 @@ def test_a_placement_that_contradicts_more_wall_than_it_explains_carries_no_evid
     assert null.nfa(clean) <= ConsensusConfig().max_false_merge
 
 
-
 def test_maps_laid_side_by_side_are_no_placement_of_them():
     """Windows of two buildings (the MIT basement and the Yujin office) where every placement
     laying one over the other misses more wall than it meets. One laying them side by side puts
@@ -447,6 +446,7 @@ def test_the_scans_do_not_pin_a_placement_down_beside_the_other_map():
     assert not est.accepted
     assert pr.best.check.agreeing + pr.best.check.disagreeing > 0
     assert "but 0 wall cells miss" not in pr.reason
+
 
 def test_sessions_placed_through_a_middle_one_are_not_cut_apart(tmp_path):
     """The Edmonton log split into three sessions: the first and the third share only the
