@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from fusionkit.errors import InputError
+from fusionkit.grid import OccupancyGrid
 from fusionkit.mapio import load_map
 from fusionkit.methods.consensus import ConsensusConfig, estimate_pair, prepare_maps
 from fusionkit.methods.consensus._search import evidence_raster, pyramid_rotations
@@ -179,7 +180,7 @@ def test_the_nearness_of_kept_placements_is_that_of_their_displacement():
 
 
 @pytest.mark.parametrize("degrees", [12.0, -150.0])
-def test_the_correlation_is_that_of_the_plain_transforms(intel_crop, degrees):
+def test_the_correlation_is_the_exact_sum_of_the_evidence_under_the_walls(intel_crop, degrees):
     from scipy import fft as sfft
 
     from fusionkit.methods.consensus._search import Correlator, _turned_cells
@@ -192,9 +193,61 @@ def test_the_correlation_is_that_of_the_plain_transforms(intel_crop, degrees):
     img = np.zeros((corr.span, corr.span), np.float32)
     img[np.minimum(cells[:, 1] - lo[1], corr.span - 1),
         np.minimum(cells[:, 0] - lo[0], corr.span - 1)] = 1
-    fa = sfft.rfft2(corr.ev.values, s=corr.shape, workers=1)
-    fb = sfft.rfft2(img, s=corr.shape, workers=1)
-    # computed as the search does (outside the assertion, whose rewriting would keep the
-    # temporaries alive and so change how numpy multiplies them)
-    want = sfft.irfft2(fa * np.conj(fb), s=corr.shape, workers=1)
+    # A's evidence in whole steps, correlated in double precision: exact once rounded
+    steps = np.rint(corr.ev.values.astype(np.float64) * corr.levels)
+    assert np.array_equal(steps, corr.steps)
+    want = np.rint(sfft.irfft2(sfft.rfft2(steps, s=corr.shape) * np.conj(sfft.rfft2(img, s=corr.shape)),
+                               s=corr.shape))
     assert np.array_equal(got, want)
+    # and at the best translation, the plain sum of the steps under B's walls
+    r0, c0 = np.unravel_index(int(np.argmax(got)), got.shape)
+    pad = np.zeros(corr.shape)
+    pad[:steps.shape[0], :steps.shape[1]] = steps
+    rr, cc = np.nonzero(img)
+    assert got[r0, c0] == pad[(rr + r0) % corr.shape[0], (cc + c0) % corr.shape[1]].sum()
+
+
+def test_the_translations_do_not_hang_on_the_rounding_of_the_transform(intel_crop, monkeypatch):
+    # numpy multiplies the transforms with other vector instructions on another CPU, which
+    # moves every correlation by a rounding residue: the translations found must not move
+    from fusionkit.methods.consensus import _search
+
+    a, b = prepare_maps([intel_crop.a, intel_crop.b])
+    ev = evidence_raster(a)
+    thetas = [math.radians(d) for d in (0.0, 31.0, -90.0, 178.0)]
+    want = [_translations(_search, ev, b.points, th) for th in thetas]
+    irfft2 = _search.sfft.irfft2
+    rng = np.random.default_rng(3)
+
+    def jittered(*args, **kwargs):
+        out = irfft2(*args, **kwargs)
+        return out + rng.uniform(-0.1, 0.1, out.shape).astype(out.dtype)
+
+    monkeypatch.setattr(_search.sfft, "irfft2", jittered)
+    got = [_translations(_search, ev, b.points, th) for th in thetas]
+    assert got == want
+
+
+def _translations(search, ev, points, theta):
+    return [(t.x, t.y, t.theta, s)
+            for t, s in search.Correlator(ev, points).translations(theta, count=6)]
+
+
+def test_the_wall_directions_do_not_hang_on_the_last_bit_of_arctan2(monkeypatch):
+    # walls along the grid's axes and diagonals lie exactly on the edges of the direction
+    # histogram's bins; another CPU's arctan2 may differ from this one's in the last bit
+    from fusionkit.methods.consensus import _search
+
+    occ = np.zeros((120, 120), np.uint8)
+    occ[20, 10:110] = 1
+    occ[10:110, 60] = 1
+    idx = np.arange(15, 105)
+    occ[idx, idx] = 1
+    occ[idx, 119 - idx] = 1
+    a = prepare_maps([OccupancyGrid(np.where(occ, 100, 0).astype(np.int8), 0.05)])[0]
+    want = _search.orientation_histogram(a)
+    arctan2 = np.arctan2
+    for way in (-np.inf, np.inf):
+        monkeypatch.setattr(_search.np, "arctan2",
+                            lambda y, x, way=way: np.nextafter(arctan2(y, x), way))
+        assert np.array_equal(_search.orientation_histogram(a), want)

@@ -154,7 +154,9 @@ def free_sides(free: np.ndarray, rows: np.ndarray, cols: np.ndarray, side_cells:
     vy = cv2.filter2D(f, -1, np.ascontiguousarray(kx.T), borderType=border)[rows, cols]
     # free space filling exactly one half of the window gives the largest mean offset
     full = float(np.abs(k).sum() * (2 * w + 1)) / 2.0
-    norm = np.hypot(vx, vy)
+    # the sums are whole numbers; the norm by correctly rounded operations alone (numpy's
+    # vector hypot rounds otherwise on another CPU)
+    norm = np.sqrt(vx * vx + vy * vy)
     sided = norm >= SIDE_ASYMMETRY * full
     scale = np.where(norm > 0, side_cells / np.maximum(norm, 1e-9), 0.0)
     seen = cv2.boxFilter(f, -1, (2 * w + 1, 2 * w + 1), normalize=False, borderType=border)[rows, cols] > 0

@@ -47,14 +47,21 @@ def orientation_histogram(index: MapIndex, bins: int = 180, sigma: float = 3.0) 
     pad = int(3 * sigma) + 2
     window = index.occupied[max(rows[0] - pad, 0):rows[-1] + pad + 1,
                             max(cols[0] - pad, 0):cols[-1] + pad + 1]
-    occ = cv2.GaussianBlur(window.astype(np.float32), (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
-    gy = cv2.Sobel(occ, cv2.CV_32F, 0, 1, ksize=3)
-    gx = cv2.Sobel(occ, cv2.CV_32F, 1, 0, ksize=3)
-    mag = np.hypot(gx, gy)
+    # in whole numbers up to the magnitude (OpenCV blurs 8-bit images bit-exactly, while its
+    # floating-point filters and numpy's vector hypot and arctan2 round otherwise on another
+    # CPU), the angle in double precision rounded to 1e-9 rad before it is binned: in single
+    # precision, the last bit of arctan2 moves a wall lying exactly on a bin's edge (the grid's
+    # axes and diagonals) into the next bin
+    occ = cv2.GaussianBlur(window.astype(np.uint8) * np.uint8(255), (0, 0), sigma,
+                           borderType=cv2.BORDER_CONSTANT)
+    gy = cv2.Sobel(occ, cv2.CV_16S, 0, 1, ksize=3).astype(np.float64)
+    gx = cv2.Sobel(occ, cv2.CV_16S, 1, 0, ksize=3).astype(np.float64)
+    mag = np.sqrt(gx * gx + gy * gy)
     sel = mag > 0.05 * max(float(mag.max()), 1e-12)
-    ang = np.mod(np.arctan2(gy[sel], gx[sel]) + index.grid.origin[2], math.pi)
+    ang = np.round(np.mod(np.arctan2(gy[sel], gx[sel]) + index.grid.origin[2], math.pi), 9)
+    ang[ang >= math.pi] = 0.0
     h, _ = np.histogram(ang, bins=bins, range=(0.0, math.pi), weights=mag[sel])
-    h = ndimage.gaussian_filter1d(h.astype(np.float64), 1.0, mode="wrap")
+    h = ndimage.gaussian_filter1d(h, 1.0, mode="wrap")
     s = h.sum()
     return h / s if s > 0 else h
 
@@ -78,8 +85,13 @@ def rotation_candidates(hist_a: np.ndarray, hist_b: np.ndarray, count: int = 3) 
     """Candidate rotations B -> A (rad) from the histograms' circular cross-correlation:
     the ``count`` best peaks, each in both branches (``theta`` and ``theta + pi``)."""
     n = hist_a.size
-    # c[k] = sum_phi H_A(phi) H_B(phi - k): B's walls turned by k bins lie on A's
+    # c[k] = sum_phi H_A(phi) H_B(phi - k): B's walls turned by k bins lie on A's; kept to 12
+    # digits, so that peaks equal but for rounding (the two axes of a rectangular building)
+    # tie exactly and are taken in a fixed order on every CPU
     c = np.fft.irfft(np.fft.rfft(hist_a) * np.conj(np.fft.rfft(hist_b)), n=n)
+    top = float(np.abs(c).max())
+    if top > 0:
+        c = np.round(c / top, 12)
     out = []
     for k in _local_maxima(c, count, max(2, n // 36)):
         th = k * math.pi / n
@@ -192,38 +204,66 @@ def _rfft2_padded(img: np.ndarray, shape: tuple) -> np.ndarray:
     return sfft.fft(rows, n=shape[0], axis=0, workers=1)
 
 
+#: Bound on the magnitude of a correlation computed by single-precision FFT: below it, the
+#: transform's rounding error stays far under half a unit (about 0.05 at 2^17 on rasters of
+#: 448 x 448 cells), so rounding recovers the exact integer sum.
+_EXACT = 2.0 ** 18
+
+
+def _levels(ev: EvidenceRaster, cells: int) -> int:
+    """Steps per unit of evidence at which A's raster is correlated with a raster of B holding
+    at most about ``cells`` wall cells: the largest power of two up to 64 that keeps every
+    correlation's magnitude within :data:`_EXACT` (``cells`` doubled, for the rotations that
+    put B's walls on more cells)."""
+    peak = max(float(np.abs(ev.values).max()), 1.0)
+    room = _EXACT / (2.0 * max(cells, 1) * peak)
+    levels = 1
+    while levels < 64 and 2 * levels <= room:
+        levels *= 2
+    return levels
+
+
 class Correlator:
     """FFT correlation of A's evidence raster with B's turned walls, for any rotation.
 
-    The padded size is fixed by B's extent, so A's transform is computed once.
+    The padded size is fixed by B's extent, so A's transform is computed once. A's evidence is
+    taken in whole steps of ``1 / levels`` (:func:`_levels`) and each correlation is rounded to
+    a whole number of steps: it is then the exact sum of the evidence under B's walls, the same
+    on every CPU (the rounding of the transform differs with the vector instructions numpy
+    uses), its equal peaks are equal and taken in a fixed order, and a translation whose walls
+    all lie on unknown cells scores 0, not a rounding residue.
     """
 
     def __init__(self, ev: EvidenceRaster, points_b: np.ndarray):
         self.ev = ev
+        self.points = np.ascontiguousarray(points_b, np.float64)
         centre = points_b.mean(axis=0) if len(points_b) else np.zeros(2)
         reach = float(np.sqrt(((points_b - centre) ** 2).sum(axis=1)).max()) if len(points_b) else 0.0
         self.span = int(math.ceil(2 * reach / ev.cell)) + 3
         ha, wa = ev.values.shape
         self.shape = (sfft.next_fast_len(ha + self.span, real=True),
                       sfft.next_fast_len(wa + self.span, real=True))
-        self.fa = _rfft2_padded(ev.values, self.shape)
-        self.points = np.ascontiguousarray(points_b, np.float64)
+        cells = int(_raster(ev, self.points, 0.0, self.span)[0].sum()) if len(points_b) else 0
+        self.levels = _levels(ev, cells)
+        self.steps = np.rint(ev.values * np.float32(self.levels)).astype(np.float32)
+        self.fa = _rfft2_padded(self.steps, self.shape)
 
     def correlate(self, theta: float) -> tuple[np.ndarray, np.ndarray]:
         """``(corr, lo)``: ``corr[dr, dc]`` the summed evidence under B's walls turned by
-        ``theta`` with its raster's cell (0, 0) on A's cell ``(lo_y + dr, lo_x + dc)``
-        (indices modulo the padded shape)."""
+        ``theta``, in steps of ``1 / levels``, with its raster's cell (0, 0) on A's cell
+        ``(lo_y + dr, lo_x + dc)`` (indices modulo the padded shape)."""
         img, lo = _raster(self.ev, self.points, theta, self.span)
         fb = _rfft2_padded(img, self.shape)
         # the product is a temporary: the inverse may work in it
-        return sfft.irfft2(self.fa * np.conj(fb), s=self.shape, workers=1, overwrite_x=True), lo
+        raw = sfft.irfft2(self.fa * np.conj(fb), s=self.shape, workers=1, overwrite_x=True)
+        return np.rint(raw, out=raw), lo
 
     def best(self, theta: float) -> float:
         """Highest correlation over all translations at rotation ``theta``."""
         if len(self.points) == 0:
             return 0.0
         corr, _ = self.correlate(theta)
-        return float(corr.max())
+        return float(corr.max()) / self.levels
 
     def translations(self, theta: float, *, count: int = 3,
                      suppress: float = 1.0) -> list[tuple[Transform2D, float]]:
@@ -256,7 +296,7 @@ class Correlator:
             # (dc - lo_x, dr - lo_y) coarse cells
             d = np.array([dc - lo[0], dr - lo[1]], float) * ev.cell
             t = (math.cos(psi) * d[0] - math.sin(psi) * d[1], math.sin(psi) * d[0] + math.cos(psi) * d[1])
-            out.append((Transform2D(float(t[0]), float(t[1]), theta), v))
+            out.append((Transform2D(float(t[0]), float(t[1]), theta), v / self.levels))
         return out
 
 
