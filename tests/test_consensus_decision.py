@@ -258,6 +258,15 @@ def test_a_map_bent_by_drift_is_not_its_own_rival():
     assert typical_move(other.transform, pr.best.transform, ib.refine_points) < distinct
 
 
+def _builtin_case(draw: int, world: str, mode: str, n: int, seed: int):
+    """Case ``n`` (two robots' maps, ``mode`` "crop" or "explore") of a built-in world as
+    ``fusionkit bench`` draws it with seed ``draw``."""
+    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
+    return make_case(CaseSpec(n, WorldSpec(world, builtin=world), mode, 2, seed),
+                     BenchConfig(methods=("consensus",), modes=(mode,), robots=(2,), cases=1,
+                                 seed=draw))
+
+
 def _check(agreeing: int, missing: int):
     from fusionkit.methods.consensus._verify import Check
     share = agreeing / (agreeing + missing)
@@ -557,13 +566,8 @@ def test_the_wider_search_does_not_lay_an_office_window_in_the_warehouse():
     rows): two buildings. The first search refuses the pair (10^-0.3 by the model); the wider
     search finds a placement at 10^-9.1 by the model with 5 m of meeting walls across, which
     ``fallback_calibration`` = 2 decades took. With the shipped 6.5 the map stays out."""
-    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
-
-    def case(world, mode, n, seed):
-        return make_case(CaseSpec(n, WorldSpec(world, builtin=world), mode, 2, seed),
-                         BenchConfig(methods=("consensus",), modes=(mode,), robots=(2,), cases=1,
-                                     seed=8))
-    office, warehouse = case("office", "crop", 5, 1985194319), case("warehouse", "explore", 2, 1504825736)
+    office = _builtin_case(8, "office", "crop", 5, 1985194319)
+    warehouse = _builtin_case(8, "warehouse", "explore", 2, 1504825736)
     maps, scans = [office.grids[0], warehouse.grids[1]], [office.scans[0], warehouse.scans[1]]
     shipped = merge(maps, scans=scans, config=MergeConfig(method="consensus", seed=7548))
     assert not shipped.placements[1].merged, shipped.placements[1]
@@ -656,13 +660,8 @@ def test_a_map_laid_along_one_straight_wall_of_another_building_is_not_merged():
     office wall, and nothing else meets: 10^-19 false alarms by the test, whose wrong
     placements, drawn at random, almost never lie along that wall. It is refused because the
     walls that meet all run one way; without that check it is merged."""
-    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
-
-    def case(world, mode, n, seed):
-        return make_case(CaseSpec(n, WorldSpec(world, builtin=world), mode, 2, seed),
-                         BenchConfig(methods=("consensus",), modes=(mode,), robots=(2,), cases=1,
-                                     seed=6))
-    rack, room = case("warehouse", "crop", 4, 1210742165), case("office", "explore", 5, 638456830)
+    rack = _builtin_case(6, "warehouse", "crop", 4, 1210742165)
+    room = _builtin_case(6, "office", "explore", 5, 638456830)
     maps, scans = [rack.grids[0], room.grids[1]], [rack.scans[0], room.scans[1]]
     est = estimate_pair(*maps, scans_a=scans[0], scans_b=scans[1], seed=9334)
     pr = est.diagnostics["pair"]
@@ -685,13 +684,8 @@ def test_a_map_left_out_because_it_may_slide_says_so_among_other_pairs():
     with a third map, a small room, as the reference. Each of the two is left out; the reason
     given is that of its pair the test found surest, the slide (whose confidence is 0), not
     that of a pair with the room that is merely unsure."""
-    from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
-
-    def case(world, mode, n, seed):
-        return make_case(CaseSpec(n, WorldSpec(world, builtin=world), mode, 2, seed),
-                         BenchConfig(methods=("consensus",), modes=(mode,), robots=(2,), cases=1,
-                                     seed=6))
-    rack, room = case("warehouse", "crop", 4, 1210742165), case("office", "explore", 5, 638456830)
+    rack = _builtin_case(6, "warehouse", "crop", 4, 1210742165)
+    room = _builtin_case(6, "office", "explore", 5, 638456830)
     data = np.full((60, 80), UNKNOWN, np.int8)
     data[10:50, 10:70] = FREE
     data[10, 10:70] = data[49, 10:70] = data[10:50, 10] = data[10:50, 69] = OCCUPIED
