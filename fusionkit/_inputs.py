@@ -30,7 +30,8 @@ def regular_file(path, what: str, error=InputError) -> Path:
     try:
         st = os.stat(path)
     except FileNotFoundError:
-        raise error(f"{_short(path)}: no such {what} file; check the path") from None
+        noun = what if "file" in what.split() else f"{what} file"
+        raise error(f"{_short(path)}: no such {noun}; check the path") from None
     except OSError as exc:
         raise error(f"{_short(path)}: the {what} cannot be read ({exc.strerror or exc}); "
                     f"check the path and its permissions") from None

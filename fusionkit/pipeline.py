@@ -24,10 +24,12 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
+import numpy as np
+
 from .alignment import AlignmentConfig
 from .errors import FusionkitError, InputError
 from .fusion import FusedMap, fuse_maps
-from .grid import OccupancyGrid
+from .grid import UNKNOWN, OccupancyGrid
 from .methods import METHODS, get_method
 from .methods.base import MergeEvent, MergeStep, PreparedMaps
 from .methods.consensus import ConsensusConfig
@@ -288,6 +290,12 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
         if abs(g.resolution - res) <= 1e-9 * res:
             out.append(g)
             continue
+        if not g.known_mask().any():
+            # nothing to resample: all unknown at the reference's cell size, over the same extent
+            # (the method refuses it with its reason)
+            shape = (max(1, round(g.rows * g.resolution / res)), max(1, round(g.cols * g.resolution / res)))
+            out.append(OccupancyGrid(np.full(shape, UNKNOWN, np.int8), res, g.origin, g.name))
+            continue
         canvas = canvas_for([g], [Transform2D.identity()], res, margin_cells=0)
         out.append(resample(g, Transform2D.identity(), canvas))
     return out
@@ -338,6 +346,9 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     if len(scans) != len(grids):
         raise InputError(f"{len(scans)} scan logs for {len(grids)} maps: give one per map (None for none)")
     names = [g.name or f"map_{k + 1}" for k, g in enumerate(grids)]
+    if not grids[config.reference].known_mask().any():
+        raise InputError(f"{names[config.reference]}: the reference map has no known cell (all "
+                         "unknown), so no map can be placed in its frame; choose another map as the reference (--reference)")
     grids = _same_resolution(list(grids), config.reference)
 
     def emit(ev: MergeEvent):

@@ -75,3 +75,19 @@ def test_simulate_says_which_seed_is_the_world_and_which_the_robots(tmp_path, ca
     world = next(line for line in out.splitlines() if line.startswith("world:"))
     assert "layout seed 0" in world and "seed 1" not in world
     assert "simulation seed 1" in out
+
+
+@pytest.mark.parametrize("argv, command", [
+    (["merge", "a.yaml", "b.yaml", "-o", "m.yaml", "--frobnicate"], "fusionkit merge"),
+    (["evaluate", "m.yaml", "--truth", "t.json", "--bogus"], "fusionkit evaluate"),
+    (["import", "carmen", "x.log", "--out", "d", "--bogus"], "fusionkit import carmen"),
+])
+def test_an_unknown_option_is_named_by_the_command_it_was_given_to(capsys, argv, command):
+    """argparse reports options it does not know from the top-level parser, with its usage;
+    fusionkit has the (sub)command that was given them say so, with that command's usage."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"usage: {command} ")
+    assert err.strip().splitlines()[-1] == f"{command}: error: unrecognized arguments: {argv[-1]}"

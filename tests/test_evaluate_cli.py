@@ -280,7 +280,7 @@ def write(path, obj):
 
 @pytest.mark.parametrize("case, message", [
     ("missing_merged", "no such map file"),
-    ("missing_truth", "no such truth file"),
+    ("missing_truth", "no such truth file; check the path"),
     ("truth_not_json", "not valid JSON"),
     ("truth_no_robots", "no robots"),
     ("truth_bad_transform", "numeric x, y"),

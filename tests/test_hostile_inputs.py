@@ -174,6 +174,18 @@ def _export_bomb(d):
     return ["export", "rosbag", str(run), "--out", str(d / "out" / "x_bag")]
 
 
+def _all_unknown_reference(d):
+    save_map(OccupancyGrid(np.full((20, 30), -1, np.int8), 0.05, (0.0, 0.0, 0.0)), d / "U.yaml")
+    return ["merge", str(d / "U.yaml"), str(d / "A.yaml"), "-o", str(d / "out" / "m.yaml")]
+
+
+def _evaluate_all_unknown(d):
+    save_map(OccupancyGrid(np.full((20, 30), -1, np.int8), 0.1, (0.0, 0.0, 0.0)), d / "U.yaml")
+    (d / "truth.json").write_text(json.dumps({"world": "A.yaml", "robots": [
+        {"name": "A", "transform": {"x": 0, "y": 0, "theta": 0}}]}))
+    return ["evaluate", str(d / "U.yaml"), "--truth", str(d / "truth.json")]
+
+
 DEEP = "[" * 100_000 + "]" * 100_000
 CASES = [
     ("yaml alias flood in origin", _merge_b(_prefix=_LAUGHS, origin="*i"), "alias"),
@@ -210,6 +222,8 @@ CASES = [
      "is a file"),
     ("import into the ROS 2 bag's folder over its metadata.yaml", _bag_folder_as_output, "overwrite the input"),
     ("export from a zip-bomb scan log", _export_bomb, "GB once loaded"),
+    ("all-unknown reference map", _all_unknown_reference, "the reference map has no known cell"),
+    ("evaluate an all-unknown map", _evaluate_all_unknown, "nothing to evaluate"),
 ]
 
 

@@ -192,6 +192,36 @@ def test_a_map_of_another_resolution_is_resampled_to_the_reference(sim):
     assert dt < 3 * sim.world.resolution and math.degrees(dr) < 2.0
 
 
+def test_a_map_of_another_resolution_with_no_known_cell_is_refused_with_its_reason(sim):
+    """Nothing to resample: such a map is refused as one of the reference's cell size is."""
+    from fusionkit.grid import OccupancyGrid
+    blank = OccupancyGrid(np.full((300, 200), -1, np.int8), 0.05, (1.0, 2.0, 0.0), "blank")
+    res = merge([sim.robots[0].grid, blank], config=MergeConfig(method="consensus", seed=2))
+    p = res.placements[1]
+    assert not p.merged and "no occupied cell" in p.reason
+    assert res.grid.resolution == sim.robots[0].grid.resolution
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 400)])
+def test_map_merge_refuses_a_map_one_cell_wide_instead_of_crashing(tmp_path, run_dir, shape):
+    """OpenCV's AKAZE fails on a single cell and corrupts its heap on a long single row, which
+    kills the process: the merge runs in a child process so that a crash fails this test."""
+    import subprocess
+    import sys
+    from fusionkit.grid import OccupancyGrid
+    data = np.zeros(shape, np.int8)
+    data[0, ::7] = 100
+    save_map(OccupancyGrid(data, 0.1, (0.0, 0.0, 0.0)), tmp_path / "thin.yaml")
+    out = tmp_path / "m.yaml"
+    done = subprocess.run([sys.executable, "-c", "import sys; from fusionkit.cli import main; "
+                           "sys.exit(main(sys.argv[1:]))", "merge", str(run_dir / "robot_1.yaml"),
+                           str(tmp_path / "thin.yaml"), "-o", str(out), "--method", "map-merge"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 3, done.stderr[-2000:]
+    assert "Traceback" not in done.stderr
+    assert json.loads(out.with_name("m.report.json").read_text())["maps"][1]["merged"] is False
+
+
 def test_virtual_scans_see_the_map_walls_and_unknown_as_returns():
     from fusionkit.grid import OccupancyGrid
     from fusionkit.virtual_scans import virtual_scans

@@ -84,7 +84,9 @@ def main(argv=None) -> int:
         _signals.install()
         argv = sys.argv[1:] if argv is None else list(argv)
         parser = build_parser(argv)
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra:   # said by the (sub)command they were given to, with its usage
+            _innermost(parser, args).error(f"unrecognized arguments: {' '.join(extra)}")
         command = f"fusionkit {args.command}"
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM as _signals.Terminated
@@ -112,6 +114,17 @@ def main(argv=None) -> int:
     except RecursionError:
         _say(f"{command}: error: an input is nested too deeply to read; check the files given")
         return 2
+
+
+def _innermost(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
+    """The parser of the innermost (sub)command ``args`` were parsed by (``fusionkit import
+    carmen``'s, not ``fusionkit``'s)."""
+    while True:
+        subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        name = getattr(args, subs[0].dest, None) if subs and subs[0].dest else None
+        if name not in (subs[0].choices if subs else {}):
+            return parser
+        parser = subs[0].choices[name]
 
 
 def _one_line(exc) -> str:

@@ -337,6 +337,9 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
                              f"{', '.join(robots)}")
 
     fused = load_map(merged)
+    if not fused.known_mask().any():
+        raise InputError(f"{merged}: the map holds no known cell (all unknown), so there is nothing "
+                         "to evaluate; give the fused map of a merge")
     world = load_map(truth_info.world)
     t_ref = robots[ref]
     metrics = evaluate_map(fused, world, t_ref)

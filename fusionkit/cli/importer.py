@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import argparse
 import textwrap
 import time
@@ -143,7 +145,8 @@ def run_carmen(args) -> int:
     for r in res.robots:
         print(f"  {r.name}: {r.scans} scans, {r.path_length_m:.1f} m path, map "
               f"{r.shape[1]} x {r.shape[0]} cells, {r.occupied} occupied, {r.free} free; "
-              f"frame -> log frame {r.transform.as_dict(4)}")
+              f"its frame in the log's: x {r.transform.x:.3f} m, y {r.transform.y:.3f} m, "
+              f"theta {math.degrees(r.transform.theta):.2f} deg")
     if res.world is not None:
         w = res.world
         print(f"  world: map {w.shape[1]} x {w.shape[0]} cells, {w.occupied} occupied; "

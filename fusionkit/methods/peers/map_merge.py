@@ -146,7 +146,14 @@ def grid_image(grid: OccupancyGrid) -> np.ndarray:
     return np.ascontiguousarray(grid.data).view(np.uint8)
 
 
+#: Grids with fewer rows or columns than this have no features: OpenCV's AKAZE fails on a single
+#: cell and corrupts its heap on a single row of many cells.
+MIN_SIDE = 3
+
+
 def _features(grid: OccupancyGrid) -> _Features:
+    if min(grid.data.shape) < MIN_SIDE:
+        return _Features(np.zeros((0, 2), np.float32), None)
     kps, desc = cv2.AKAZE_create().detectAndCompute(grid_image(grid), None)
     pts = np.array([k.pt for k in kps], np.float32).reshape(-1, 2)
     return _Features(pts, desc if len(kps) else None)
