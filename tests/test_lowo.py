@@ -207,3 +207,29 @@ def test_peers_from_a_record_of_another_draw_is_one_line_and_exit_2(lowo, record
     # and --cross-wall on a record made before the one-way check
     assert lowo.main(["--from", str(prev), "--cross-wall", "2"]) == 2
     assert "cross_wall_m" in capsys.readouterr().err
+
+
+def test_the_refused_pairs_are_classed_by_the_reason_the_method_gives(lowo):
+    """``benchmarks/lowo_misses.py`` classes a record's refused resolvable pairs by the reasons
+    the consensus method prints, and tables what a start at the truth changed."""
+    import sys
+    sys.path.insert(0, str(SCRIPT.parent))
+    spec = importlib.util.spec_from_file_location("lowo_misses_script", SCRIPT.parent / "lowo_misses.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    assert mod.refusal("ambiguous: 2 distinct placements fit about as well (90-100% ...") == "rival"
+    assert mod.refusal("best placement is not distinguishable from chance: 99% ...") == "chance"
+    assert mod.refusal("best placement misses too much: 90 wall cells ...") == "misses"
+    assert mod.refusal("best placement is contradicted: 12% of the walls meet ...") == "contradicted"
+    assert mod.refusal("the placement may slide: the walls that meet all run one way ...") == "slides"
+    rows = [{"class": "chance", "best": "right", "oracle": "refused", "oracle_class": "chance"},
+            {"class": "chance", "best": "right", "oracle": "right", "oracle_class": ""},
+            {"class": "contradicted", "best": "wrong", "oracle": "refused", "oracle_class": "chance"}]
+    text = mod.table(rows)
+    assert "| chance | right | 2 | 1 | chance 1 |" in text
+    assert "| contradicted | wrong | 1 | 0 | chance 1 |" in text
+    assert text.endswith("3 refused resolvable pairs; with the truth as a start 1 placed right.")
+    # only resolvable positives the shipped decision refuses are taken
+    record = {"max_false_merge": 0.01, "pairs": [
+        pos("w", -30.0), pos("w", 5.0), pos("w", 5.0, resolvable=False), neg("w", "v", 5.0)]}
+    assert [r["consensus"]["log10_nfa_model"] for r in mod.misses(record)] == [5.0]

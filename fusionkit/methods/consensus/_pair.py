@@ -27,7 +27,7 @@ __all__ = ["ConsensusConfig", "Candidate", "PairResult", "estimate_indexed", "di
 @dataclass(frozen=True)
 class Candidate:
     """A refined, verified placement of B in A: the transform B -> A, its check and where the
-    hypothesis came from (``"scans"`` or ``"walls"``)."""
+    hypothesis came from (``"scans"``, ``"walls"``, ``"aliases"`` or ``"prior"``)."""
 
     transform: Transform2D
     check: Check
@@ -159,7 +159,7 @@ def is_rival(null: NullModel, best, other, risk: float, fraction: float) -> bool
 
 def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, hist_b,
                      evidence_a: EvidenceRaster, ia: int = 0, ib: int = 1, seed=0,
-                     exhaustive: bool = False, tree_a=None) -> PairResult:
+                     exhaustive: bool = False, tree_a=None, priors=()) -> PairResult:
     """Place map ``b`` in map ``a`` (both prepared), from every source of candidates.
 
     With ``exhaustive``, the translation search also runs at every ``fallback_step`` degrees
@@ -168,7 +168,8 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     placement is refined on the scans' end points (``tree_a``: a ``cKDTree`` of ``a.cloud``,
     built when not given). The best placement is then judged against the null distribution of
     the pair (:class:`~fusionkit.methods.consensus.NullModel`) and against every distinct placement
-    found.
+    found. ``priors`` are placements (B -> A) from elsewhere, such as odometry or a benchmark's
+    truth, refined and judged with the search's own starts, ahead of them.
     """
     t0 = time.perf_counter()
     if len(a.points) == 0 or len(b.points) == 0:
@@ -177,7 +178,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                           reason=" and ".join(f"map {k}" for k in empty)
                           + f" hold{'s' if len(empty) == 1 else ''} no occupied cell (wall) to "
                           "place a map by")
-    starts: list[tuple[Transform2D, str]] = []
+    starts: list[tuple[Transform2D, str]] = [(t, "prior") for t in priors]
     rots = rotation_candidates(hist_a, hist_b, cfg.rotation_peaks)
     if exhaustive:
         # every rotation, swept a level up the evidence pyramid; the best of them searched in full
