@@ -291,10 +291,9 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
             out.append(g)
             continue
         if not g.known_mask().any():
-            # nothing to resample: all unknown at the reference's cell size, over the same extent
-            # (the method refuses it with its reason)
-            shape = (max(1, round(g.rows * g.resolution / res)), max(1, round(g.cols * g.resolution / res)))
-            out.append(OccupancyGrid(np.full(shape, UNKNOWN, np.int8), res, g.origin, g.name))
+            # nothing to resample (and no extent worth cells): one unknown cell at the reference's
+            # cell size, which the method refuses with its reason
+            out.append(OccupancyGrid(np.full((1, 1), UNKNOWN, np.int8), res, g.origin, g.name))
             continue
         canvas = canvas_for([g], [Transform2D.identity()], res, margin_cells=0)
         out.append(resample(g, Transform2D.identity(), canvas))
@@ -348,7 +347,7 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     names = [g.name or f"map_{k + 1}" for k, g in enumerate(grids)]
     if not grids[config.reference].known_mask().any():
         raise InputError(f"{names[config.reference]}: the reference map has no known cell (all "
-                         "unknown), so no map can be placed in its frame; choose another map as the reference (--reference)")
+                         "unknown), so no map can be placed in its frame; choose another map as the reference")
     grids = _same_resolution(list(grids), config.reference)
 
     def emit(ev: MergeEvent):

@@ -78,9 +78,11 @@ def test_simulate_says_which_seed_is_the_world_and_which_the_robots(tmp_path, ca
 
 
 @pytest.mark.parametrize("argv, command", [
-    (["merge", "a.yaml", "b.yaml", "-o", "m.yaml", "--frobnicate"], "fusionkit merge"),
+    (["merge", "a.yaml", "b.yaml", "-o", "m.yaml", "--bogus"], "fusionkit merge"),
     (["evaluate", "m.yaml", "--truth", "t.json", "--bogus"], "fusionkit evaluate"),
     (["import", "carmen", "x.log", "--out", "d", "--bogus"], "fusionkit import carmen"),
+    (["import", "--bogus", "carmen", "x.log", "--out", "d"], "fusionkit import"),
+    (["--bogus", "merge", "a.yaml", "b.yaml", "-o", "m.yaml"], "fusionkit"),
 ])
 def test_an_unknown_option_is_named_by_the_command_it_was_given_to(capsys, argv, command):
     """argparse reports options it does not know from the top-level parser, with its usage;
@@ -90,4 +92,4 @@ def test_an_unknown_option_is_named_by_the_command_it_was_given_to(capsys, argv,
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert err.startswith(f"usage: {command} ")
-    assert err.strip().splitlines()[-1] == f"{command}: error: unrecognized arguments: {argv[-1]}"
+    assert err.strip().splitlines()[-1] == f"{command}: error: unrecognized arguments: --bogus"

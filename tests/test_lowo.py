@@ -212,8 +212,6 @@ def test_peers_from_a_record_of_another_draw_is_one_line_and_exit_2(lowo, record
 def test_the_refused_pairs_are_classed_by_the_reason_the_method_gives(lowo):
     """``benchmarks/lowo_misses.py`` classes a record's refused resolvable pairs by the reasons
     the consensus method prints, and tables what a start at the truth changed."""
-    import sys
-    sys.path.insert(0, str(SCRIPT.parent))
     spec = importlib.util.spec_from_file_location("lowo_misses_script", SCRIPT.parent / "lowo_misses.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

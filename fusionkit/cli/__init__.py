@@ -86,7 +86,7 @@ def main(argv=None) -> int:
         parser = build_parser(argv)
         args, extra = parser.parse_known_args(argv)
         if extra:   # said by the (sub)command they were given to, with its usage
-            _innermost(parser, args).error(f"unrecognized arguments: {' '.join(extra)}")
+            _innermost(parser, args, argv, extra).error(f"unrecognized arguments: {' '.join(extra)}")
         command = f"fusionkit {args.command}"
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM as _signals.Terminated
@@ -116,15 +116,20 @@ def main(argv=None) -> int:
         return 2
 
 
-def _innermost(parser: argparse.ArgumentParser, args) -> argparse.ArgumentParser:
-    """The parser of the innermost (sub)command ``args`` were parsed by (``fusionkit import
-    carmen``'s, not ``fusionkit``'s)."""
+def _innermost(parser: argparse.ArgumentParser, args, argv, extra) -> argparse.ArgumentParser:
+    """The parser of the (sub)command the ``extra`` words were given to: the innermost one
+    ``args`` were parsed by (``fusionkit import carmen``'s, not ``fusionkit``'s), or an outer one
+    when they stand before the name of the command inside it."""
+    pos = 0
     while True:
         subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
         name = getattr(args, subs[0].dest, None) if subs and subs[0].dest else None
-        if name not in (subs[0].choices if subs else {}):
+        if name not in (subs[0].choices if subs else {}) or name not in argv[pos:]:
             return parser
-        parser = subs[0].choices[name]
+        at = argv.index(name, pos)
+        if any(word in extra for word in argv[pos:at]):
+            return parser
+        parser, pos = subs[0].choices[name], at + 1
 
 
 def _one_line(exc) -> str:

@@ -169,7 +169,9 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     built when not given). The best placement is then judged against the null distribution of
     the pair (:class:`~fusionkit.methods.consensus.NullModel`) and against every distinct placement
     found. ``priors`` are placements (B -> A) from elsewhere, such as odometry or a benchmark's
-    truth, refined and judged with the search's own starts, ahead of them.
+    truth, refined and judged with the search's own starts, ahead of them (a candidate is named
+    after the first start that reached it, so a search start ending where a prior did is not
+    counted again).
     """
     t0 = time.perf_counter()
     if len(a.points) == 0 or len(b.points) == 0:
