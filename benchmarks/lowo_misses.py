@@ -7,7 +7,7 @@ For each record of ``benchmarks/lowo.py``, every resolvable positive its first s
 rebuilt (the record's seed and sizes, checked against the record) and classed by the reason it
 was refused (a rival placement, not distinguishable from chance, misses too much, contradicted,
 slides) and by whether the best placement the search found was right. Each is then estimated
-again with the truth given as one more start (``estimate_indexed(..., priors=[truth])``, shipped
+again with the truth given as one more start (``estimate_pair(..., priors=[truth])``, shipped
 settings, the first search alone as in the record): a pair placed then is one the search lost;
 one still refused is refused by the test, whatever a search finds. Prints a Markdown table.
 """
@@ -47,15 +47,9 @@ def misses(record: dict) -> list[dict]:
 def oracle(p: dict) -> tuple[str, str]:
     """``(outcome, class)`` of the first search of pair ``p`` given its truth as a start:
     ``outcome`` "right", "wrong" or "refused", ``class`` the refusal's (empty when placed)."""
-    from fusionkit.methods.consensus import ConsensusConfig, prepare_maps
-    from fusionkit.methods.consensus._pair import estimate_indexed
-    from fusionkit.methods.consensus._search import evidence_raster, orientation_histogram
-    cfg = ConsensusConfig()
-    seed = p["case_seed"] % 10_000
-    ia, ib = prepare_maps([p["a"], p["b"]], [p["scans_a"], p["scans_b"]], config=cfg, seed=seed)
-    pr = estimate_indexed(ia, ib, cfg, hist_a=orientation_histogram(ia), hist_b=orientation_histogram(ib),
-                          evidence_a=evidence_raster(ia, coarse=cfg.coarse, max_side=cfg.coarse_side),
-                          seed=seed, priors=[p["truth"]])
+    from fusionkit.methods.consensus import estimate_pair
+    pr = estimate_pair(p["a"], p["b"], scans_a=p["scans_a"], scans_b=p["scans_b"],
+                       seed=p["case_seed"] % 10_000, priors=[p["truth"]]).diagnostics["pair"]
     if not pr.accepted:
         return "refused", refusal(pr.reason)
     return L._outcome(pr.transform, p["truth"], p["b"]), ""

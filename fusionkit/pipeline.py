@@ -347,7 +347,8 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     names = [g.name or f"map_{k + 1}" for k, g in enumerate(grids)]
     if not grids[config.reference].known_mask().any():
         raise InputError(f"{names[config.reference]}: the reference map has no known cell (all "
-                         "unknown), so no map can be placed in its frame; choose another map as the reference")
+                         "unknown), so no map can be placed in its frame; choose another map as "
+                         "the reference")
     grids = _same_resolution(list(grids), config.reference)
 
     def emit(ev: MergeEvent):

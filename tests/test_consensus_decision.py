@@ -708,25 +708,22 @@ def test_a_placement_given_as_a_prior_is_refined_and_judged_with_the_search():
     from odometry, or a benchmark's truth), the same first search places the pair within a cell,
     from that start; a prior far from the truth places nothing wrong."""
     from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
-    from fusionkit.methods.consensus._pair import estimate_indexed
-    from fusionkit.methods.consensus._search import evidence_raster, orientation_histogram
     world = WorldSpec("yujin_office_run2", path=str(REAL / "yujin_office_run2.yaml"))
     case = make_case(CaseSpec(0, world, "crop", 2, 1045594725),
                      BenchConfig(methods=("consensus",), modes=("crop",), robots=(2,), cases=1, seed=8))
     truth = case.truth[0].inverse @ case.truth[1]
-    cfg = ConsensusConfig()
-    ia, ib = prepare_maps(case.grids, case.scans, config=cfg, seed=4725)
+    a, b = case.grids
+    res = a.resolution
 
     def search(priors=()):
-        return estimate_indexed(ia, ib, cfg, hist_a=orientation_histogram(ia),
-                                hist_b=orientation_histogram(ib), seed=4725, priors=priors,
-                                evidence_a=evidence_raster(ia, coarse=cfg.coarse, max_side=cfg.coarse_side))
+        return estimate_pair(a, b, scans_a=case.scans[0], scans_b=case.scans[1], seed=4725,
+                             priors=priors).diagnostics["pair"]
     alone = search()
     assert not alone.accepted and "contradicted" in alone.reason
-    assert placement_error(alone.best.transform, truth, case.grids[1])[0] > 50 * ia.resolution
+    assert placement_error(alone.best.transform, truth, b)[0] > 50 * res
     given = search([truth])
     assert given.accepted and given.best.source == "prior"
-    d, r = placement_error(given.transform, truth, case.grids[1])
-    assert d < ia.resolution and r < math.radians(0.5)
+    d, r = placement_error(given.transform, truth, b)
+    assert d < res and r < math.radians(0.5)
     far = search([Transform2D(truth.x + 7.0, truth.y - 5.0, truth.theta + 0.6)])
     assert not far.accepted

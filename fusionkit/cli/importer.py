@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import math
-
 import argparse
+import math
 import textwrap
 import time
 

@@ -96,7 +96,7 @@ def _pair_task(shared, task) -> PairResult:
 
 def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None = None,
                   scans_b: ScanLog | None = None, config: ConsensusConfig = ConsensusConfig(),
-                  seed: int = 0):
+                  seed: int = 0, priors=()):
     """Place map ``b`` in map ``a``'s frame.
 
     Returns
@@ -106,14 +106,16 @@ def estimate_pair(a: OccupancyGrid, b: OccupancyGrid, *, scans_a: ScanLog | None
         is of it (0..1; :attr:`PairResult.confidence`), ``accepted`` whether it passed;
         ``candidates`` lists every distinct placement that passed the test, each with that
         confidence (the best one with the pair's); ``diagnostics["pair"]`` is the
-        :class:`PairResult`.
+        :class:`PairResult`. ``priors``: placements (B -> A) from elsewhere refined and judged
+        with the search's own (:func:`estimate_indexed`).
     """
     from ..peers import PairEstimate
     t0 = time.perf_counter()
     ia, ib = prepare_maps([a, b], [scans_a, scans_b], config=config, seed=seed)
     pr = estimate_indexed(ia, ib, config, hist_a=orientation_histogram(ia),
                           hist_b=orientation_histogram(ib),
-                          evidence_a=evidence_raster(ia, coarse=config.coarse, max_side=config.coarse_side), seed=seed)
+                          evidence_a=evidence_raster(ia, coarse=config.coarse, max_side=config.coarse_side), seed=seed,
+                          priors=priors)
     return PairEstimate(pr.transform, pr.confidence, pr.accepted,
                         tuple((c.transform, pr.confidence if c is pr.best else c.confidence)
                               for c in pr.plausible) or
