@@ -185,8 +185,9 @@ class MergeResult:
         ``i + 1`` of them).
     fused : FusedMap
         The fused map with each cell's contributing map (``owner``) and the cumulative steps.
-    unique : tuple of UniquePoses
-        Algorithm 1's result per map.
+    unique : tuple of UniquePoses or None
+        Algorithm 1's result per map (None for a map the paper's method could not scan: no
+        free cell and no recorded scans).
     plan : FusionPlan
         Agreement counts and the planned order.
     agreements : dict
@@ -349,6 +350,10 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
         raise InputError(f"{names[config.reference]}: the reference map has no known cell (all "
                          "unknown), so no map can be placed in its frame; choose another map as "
                          "the reference")
+    if not grids[config.reference].occupied_mask().any():
+        raise InputError(f"{names[config.reference]}: the reference map has no wall (no occupied "
+                         "cell), so no map can be placed in its frame; choose another map as the "
+                         "reference")
     grids = _same_resolution(list(grids), config.reference)
 
     def emit(ev: MergeEvent):

@@ -179,6 +179,19 @@ def _all_unknown_reference(d):
     return ["merge", str(d / "U.yaml"), str(d / "A.yaml"), "-o", str(d / "out" / "m.yaml")]
 
 
+def _no_wall_reference(d):
+    save_map(OccupancyGrid(np.zeros((20, 30), np.int8), 0.1, (0.0, 0.0, 0.0)), d / "F.yaml")
+    return ["merge", str(d / "F.yaml"), str(d / "A.yaml"), "-o", str(d / "out" / "m.yaml")]
+
+
+def _no_free_reference(d):
+    data = np.full((20, 30), -1, np.int8)
+    data[2:18, 3] = data[2:18, 26] = 100
+    save_map(OccupancyGrid(data, 0.1, (0.0, 0.0, 0.0)), d / "W.yaml")
+    return ["merge", str(d / "W.yaml"), str(d / "A.yaml"), "-o", str(d / "out" / "m.yaml"),
+            "--method", "spectral-pso"]
+
+
 def _evaluate_all_unknown(d):
     save_map(OccupancyGrid(np.full((20, 30), -1, np.int8), 0.1, (0.0, 0.0, 0.0)), d / "U.yaml")
     (d / "truth.json").write_text(json.dumps({"world": "A.yaml", "robots": [
@@ -223,6 +236,8 @@ CASES = [
     ("import into the ROS 2 bag's folder over its metadata.yaml", _bag_folder_as_output, "overwrite the input"),
     ("export from a zip-bomb scan log", _export_bomb, "GB once loaded"),
     ("all-unknown reference map", _all_unknown_reference, "the reference map has no known cell"),
+    ("reference map with no wall", _no_wall_reference, "the reference map has no wall"),
+    ("spectral-pso, reference map with no free cell", _no_free_reference, "no free cell"),
     ("evaluate an all-unknown map", _evaluate_all_unknown, "nothing to evaluate"),
 ]
 

@@ -198,8 +198,25 @@ def test_a_map_of_another_resolution_with_no_known_cell_is_refused_with_its_reas
     blank = OccupancyGrid(np.full((300, 200), -1, np.int8), 0.05, (1.0, 2.0, 0.0), "blank")
     res = merge([sim.robots[0].grid, blank], config=MergeConfig(method="consensus", seed=2))
     p = res.placements[1]
-    assert not p.merged and "no occupied cell" in p.reason
+    assert not p.merged and "blank holds no occupied cell" in p.reason
     assert res.grid.resolution == sim.robots[0].grid.resolution
+
+
+def test_the_papers_method_leaves_out_a_map_it_cannot_scan_and_merges_the_rest(run_dir, tmp_path, capsys):
+    """A map of walls and unknown space alone, without recorded scans, has nowhere to cast a
+    virtual scan from: that map is left out with its reason (exit 3), not the whole merge."""
+    from fusionkit.grid import OccupancyGrid
+    data = np.full((60, 80), -1, np.int8)
+    data[5:55, 10] = data[5:55, 70] = data[5, 10:71] = 100
+    save_map(OccupancyGrid(data, 0.1, (0.0, 0.0, 0.0), "walls"), tmp_path / "walls.yaml")
+    out = tmp_path / "m.yaml"
+    code = main(["merge", str(run_dir / "robot_1.yaml"), str(run_dir / "robot_2.yaml"),
+                 str(tmp_path / "walls.yaml"), "-o", str(out), "--method", "spectral-pso", "--seed", "3"])
+    assert code == 3, capsys.readouterr().err
+    report = json.loads((tmp_path / "m.report.json").read_text())
+    rows = {Path(m["input"]).stem: m for m in report["maps"]}
+    assert rows["robot_2"]["merged"]
+    assert not rows["walls"]["merged"] and "no free cell" in rows["walls"]["reason"]
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 400)])

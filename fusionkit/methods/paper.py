@@ -53,15 +53,27 @@ class SpectralPSO:
         t0 = time.perf_counter()
         from ..virtual_scans import virtual_scans
         logs, virtual = [], []
+        n = len(grids)
+        reasons = [""] * n
         for k, (g, s) in enumerate(zip(grids, scans)):
             emit(MergeEvent("scans", k, len(grids), names[k]))
             if s is None:
-                s = virtual_scans(g, n_poses=config.virtual_poses, seed=config.seed + k)
+                try:
+                    s = virtual_scans(g, n_poses=config.virtual_poses, seed=config.seed + k)
+                except InputError:
+                    if k == maps.reference:
+                        raise InputError(f"{names[k]}: the reference map has no free cell and no "
+                                         "recorded scans, so no scan to match; choose another "
+                                         "map as the reference") from None
+                    # a map with no free space and no scans gives this method nothing to match:
+                    # it is left out with its reason, the others are merged
+                    reasons[k] = ("it has no free cell and no recorded scans, so no scan to match "
+                                  "(this method places maps by their scans)")
                 virtual.append(True)
             else:
                 virtual.append(False)
             logs.append(s)
-        beams = {s.n_beams for s in logs}
+        beams = {s.n_beams for s in logs if s is not None}
         if len(beams) > 1:
             raise InputError(f"the maps' scans have different beam counts {sorted(beams)}; spectra can "
                              "only be compared between scans of the same beam count")
@@ -72,6 +84,9 @@ class SpectralPSO:
         unique = []
         for k, s in enumerate(logs):
             emit(MergeEvent("unique_poses", k, len(logs), names[k]))
+            if s is None:
+                unique.append(None)
+                continue
             try:
                 unique.append(find_unique_poses(s, sub_sec=config.sub_sec, delta=config.delta,
                                                 target=config.unique_count))
@@ -81,12 +96,14 @@ class SpectralPSO:
 
         # 3. agreement and fusion order (eq. 2)
         t0 = time.perf_counter()
-        n = len(grids)
         counts = np.zeros((n, n), int)
         agreements: dict = {}
         for a in range(n):
             for b in range(a + 1, n):
                 emit(MergeEvent("pairing", len(agreements), n * (n - 1) // 2, f"{names[a]} ~ {names[b]}"))
+                if unique[a] is None or unique[b] is None:
+                    agreements[(a, b)] = PairAgreement(a, b, np.zeros((0, 0)), np.zeros((0, 2), int), 0)
+                    continue
                 ag = agreement(unique[a].unique_spectra, unique[b].unique_spectra, config.theta, a=a, b=b)
                 agreements[(a, b)] = ag
                 counts[a, b] = counts[b, a] = ag.count
@@ -100,7 +117,6 @@ class SpectralPSO:
         transforms: list = [None] * n
         confidence = [0.0] * n
         overlap = [0] * n
-        reasons = [""] * n
         steps: list[MergeStep] = []
         accepted_order: list = []
         if plan.steps:

@@ -175,9 +175,10 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     """
     t0 = time.perf_counter()
     if len(a.points) == 0 or len(b.points) == 0:
-        empty = [k + 1 for k, ix in ((ia, a), (ib, b)) if len(ix.points) == 0]
+        empty = [ix.grid.name or f"map {k + 1}" for k, ix in ((ia, a), (ib, b))
+                 if len(ix.points) == 0]
         return PairResult(ia, ib, None, 0.0, False, False,
-                          reason=" and ".join(f"map {k}" for k in empty)
+                          reason=" and ".join(empty)
                           + f" hold{'s' if len(empty) == 1 else ''} no occupied cell (wall) to "
                           "place a map by")
     starts: list[tuple[Transform2D, str]] = [(t, "prior") for t in priors]
