@@ -18,6 +18,7 @@ peer, all behind one interface), fuses every placed map into the reference frame
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass, field, replace
@@ -30,12 +31,13 @@ from .alignment import AlignmentConfig
 from .errors import FusionkitError, InputError
 from .fusion import FusedMap, fuse_maps
 from .grid import UNKNOWN, OccupancyGrid
+from .mapping import MAX_CELLS
 from .methods import METHODS, get_method
 from .methods.base import MergeEvent, MergeStep, PreparedMaps
 from .methods.consensus import ConsensusConfig
 from .pairing import FusionPlan
 from .pso import PSOConfig
-from .resample import canvas_for, resample
+from .resample import canvas_for, resample, transformed_bounds
 from .scanlog import ScanLog, load_scans, scans_path_for
 from .transform import Transform2D
 
@@ -194,8 +196,9 @@ class MergeResult:
         ``(a, b) -> PairAgreement`` for every pair ``a < b``.
     steps : tuple of MergeStep
         Every alignment tried, accepted or not, with its PSO history.
-    scans : tuple of ScanLog
-        The scans used (virtual ones for maps that had none).
+    scans : tuple of ScanLog or None
+        The scans used (virtual ones for maps that had none; None for a map the paper's method
+        left out unscanned).
     virtual : tuple of bool
         Which maps got virtual scans.
     seconds : dict
@@ -296,6 +299,13 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
             # cell size, which the method refuses with its reason
             out.append(OccupancyGrid(np.full((1, 1), UNKNOWN, np.int8), res, g.origin, g.name))
             continue
+        x0, y0, x1, y1 = transformed_bounds(g, Transform2D.identity())
+        rows, cols = math.ceil((y1 - y0) / res), math.ceil((x1 - x0) / res)
+        if rows * cols > MAX_CELLS:
+            raise InputError(f"{g.name or 'a map'}: at the reference map's {res:g} m cells this "
+                             f"map of {g.resolution:g} m cells would be {rows} x {cols} cells, more "
+                             f"than the {MAX_CELLS} fusionkit can hold; choose a coarser map as "
+                             "the reference, or crop this one")
         canvas = canvas_for([g], [Transform2D.identity()], res, margin_cells=0)
         out.append(resample(g, Transform2D.identity(), canvas))
     return out

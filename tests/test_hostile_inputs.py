@@ -192,6 +192,13 @@ def _no_free_reference(d):
             "--method", "spectral-pso"]
 
 
+def _coarse_giant(d):
+    data = np.zeros((300, 300), np.int8)
+    data[0, :] = data[-1, :] = 100
+    save_map(OccupancyGrid(data, 10.0, (0.0, 0.0, 0.0)), d / "G.yaml")
+    return ["merge", str(d / "A.yaml"), str(d / "G.yaml"), "-o", str(d / "out" / "m.yaml")]
+
+
 def _evaluate_all_unknown(d):
     save_map(OccupancyGrid(np.full((20, 30), -1, np.int8), 0.1, (0.0, 0.0, 0.0)), d / "U.yaml")
     (d / "truth.json").write_text(json.dumps({"world": "A.yaml", "robots": [
@@ -237,7 +244,9 @@ CASES = [
     ("export from a zip-bomb scan log", _export_bomb, "GB once loaded"),
     ("all-unknown reference map", _all_unknown_reference, "the reference map has no known cell"),
     ("reference map with no wall", _no_wall_reference, "the reference map has no wall"),
-    ("spectral-pso, reference map with no free cell", _no_free_reference, "no free cell"),
+    ("spectral-pso, reference map with no free cell", _no_free_reference,
+     "the reference map has no free cell"),
+    ("coarse map that would be 9e8 cells at the reference cell size", _coarse_giant, "G: at the reference map's"),
     ("evaluate an all-unknown map", _evaluate_all_unknown, "nothing to evaluate"),
 ]
 

@@ -93,8 +93,9 @@ def test_merge_refuses_a_single_map_and_mismatched_scans(sim):
     with pytest.raises(InputError, match="scan logs for"):
         merge([g, g], scans=[sim.robots[0].scans])
     short = sim.robots[1].scans.subset(slice(0, 8))
-    with pytest.raises(InputError, match="sub_sec"):
-        merge([g, sim.robots[1].grid], scans=[sim.robots[0].scans, short],
+    # too few scans for one section of Algorithm 1 in the reference (another map is left out)
+    with pytest.raises(InputError, match=r"the reference map has only 8 scans.*2\*sub_sec\+1"):
+        merge([sim.robots[1].grid, g], scans=[short, sim.robots[0].scans],
               config=MergeConfig(method="spectral-pso"))
 
 
@@ -202,21 +203,45 @@ def test_a_map_of_another_resolution_with_no_known_cell_is_refused_with_its_reas
     assert res.grid.resolution == sim.robots[0].grid.resolution
 
 
-def test_the_papers_method_leaves_out_a_map_it_cannot_scan_and_merges_the_rest(run_dir, tmp_path, capsys):
-    """A map of walls and unknown space alone, without recorded scans, has nowhere to cast a
-    virtual scan from: that map is left out with its reason (exit 3), not the whole merge."""
+def _unscannable(kind, run_dir, d):
+    """A third map the paper's method cannot use, written as d/odd.yaml (and its scans)."""
     from fusionkit.grid import OccupancyGrid
-    data = np.full((60, 80), -1, np.int8)
-    data[5:55, 10] = data[5:55, 70] = data[5, 10:71] = 100
-    save_map(OccupancyGrid(data, 0.1, (0.0, 0.0, 0.0), "walls"), tmp_path / "walls.yaml")
+    if kind in ("walls only", "tiny free space"):
+        data = np.full((60, 80), -1, np.int8)
+        if kind == "walls only":
+            data[5:55, 10] = data[5:55, 70] = data[5, 10:71] = 100
+        else:
+            data[10:15, 10:15] = 100
+            data[11:14, 11:14] = 0
+        save_map(OccupancyGrid(data, 0.1, (0.0, 0.0, 0.0), "odd"), d / "odd.yaml")
+        return
+    save_map(load_map(run_dir / "robot_3.yaml"), d / "odd.yaml")
+    log = load_scans(run_dir / "robot_3.scans.npz")
+    if kind == "five scans":
+        log = ScanLog(log.poses[:5], log.ranges[:5], log.angle_min, log.angle_increment, log.range_max)
+    else:
+        log = ScanLog(log.poses, log.ranges[:, ::2], log.angle_min, 2 * log.angle_increment, log.range_max)
+    save_scans(d / "odd.scans.npz", log)
+
+
+@pytest.mark.parametrize("kind, words", [("walls only", "no free cell"),
+                                         ("tiny free space", "free space for only"),
+                                         ("five scans", "only 5 scans"),
+                                         ("other beam count", "180 beams")])
+def test_the_papers_method_leaves_out_a_map_it_cannot_scan_and_merges_the_rest(run_dir, tmp_path, capsys,
+                                                                              kind, words):
+    """A map the paper's method cannot use (nothing to cast a virtual scan from, too few scans
+    for one section of Algorithm 1, scans of another beam count) is left out with its reason
+    (exit 3), not the whole merge."""
+    _unscannable(kind, run_dir, tmp_path)
     out = tmp_path / "m.yaml"
     code = main(["merge", str(run_dir / "robot_1.yaml"), str(run_dir / "robot_2.yaml"),
-                 str(tmp_path / "walls.yaml"), "-o", str(out), "--method", "spectral-pso", "--seed", "3"])
+                 str(tmp_path / "odd.yaml"), "-o", str(out), "--method", "spectral-pso", "--seed", "3"])
     assert code == 3, capsys.readouterr().err
     report = json.loads((tmp_path / "m.report.json").read_text())
     rows = {Path(m["input"]).stem: m for m in report["maps"]}
     assert rows["robot_2"]["merged"]
-    assert not rows["walls"]["merged"] and "no free cell" in rows["walls"]["reason"]
+    assert not rows["odd"]["merged"] and words in rows["odd"]["reason"], rows["odd"]["reason"]
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 400)])

@@ -54,37 +54,50 @@ class SpectralPSO:
         from ..virtual_scans import virtual_scans
         logs, virtual = [], []
         n = len(grids)
+        ref = maps.reference
+        # a map this method cannot use (nothing to scan from, too few scans, another beam count)
+        # is left out with its reason and the others are merged; the reference cannot be
         reasons = [""] * n
+
+        def unusable(k: int, why: str) -> None:
+            if k == ref:
+                raise InputError(f"{names[k]}: the reference map {why}; choose another map as the "
+                                 "reference")
+            reasons[k] = f"it {why}"
+
         for k, (g, s) in enumerate(zip(grids, scans)):
             emit(MergeEvent("scans", k, len(grids), names[k]))
             if s is None:
                 try:
                     s = virtual_scans(g, n_poses=config.virtual_poses, seed=config.seed + k)
                 except InputError:
-                    if k == maps.reference:
-                        raise InputError(f"{names[k]}: the reference map has no free cell and no "
-                                         "recorded scans, so no scan to match; choose another "
-                                         "map as the reference") from None
-                    # a map with no free space and no scans gives this method nothing to match:
-                    # it is left out with its reason, the others are merged
-                    reasons[k] = ("it has no free cell and no recorded scans, so no scan to match "
-                                  "(this method places maps by their scans)")
-                virtual.append(True)
+                    unusable(k, "has no free cell and no recorded scans, so no scan to match "
+                                "(this method places maps by their scans)")
+                virtual.append(s is not None)
             else:
                 virtual.append(False)
             logs.append(s)
-        beams = {s.n_beams for s in logs if s is not None}
-        if len(beams) > 1:
-            raise InputError(f"the maps' scans have different beam counts {sorted(beams)}; spectra can "
-                             "only be compared between scans of the same beam count")
+        beams = logs[ref].n_beams
+        for k, s in enumerate(logs):
+            if s is not None and s.n_beams != beams:
+                unusable(k, f"has scans of {s.n_beams} beams where the reference's have {beams}; "
+                            "spectra compare only scans of one beam count")
+                logs[k] = None
         seconds["scans"] = time.perf_counter() - t0
 
         # 2. unique poses (Algorithm 1)
         t0 = time.perf_counter()
         unique = []
+        least = 2 * config.sub_sec + 1
         for k, s in enumerate(logs):
             emit(MergeEvent("unique_poses", k, len(logs), names[k]))
-            if s is None:
+            if s is not None and config.sub_sec >= 1 and s.n_scans < least:
+                unusable(k, (f"has only {s.n_scans} scans" if not virtual[k] else
+                             f"has free space for only {s.n_scans} virtual scans")
+                         + f", fewer than the {least} of one section of Algorithm 1 "
+                         f"(2*sub_sec+1)")
+                logs[k] = None
+            if logs[k] is None:
                 unique.append(None)
                 continue
             try:
@@ -102,7 +115,8 @@ class SpectralPSO:
             for b in range(a + 1, n):
                 emit(MergeEvent("pairing", len(agreements), n * (n - 1) // 2, f"{names[a]} ~ {names[b]}"))
                 if unique[a] is None or unique[b] is None:
-                    agreements[(a, b)] = PairAgreement(a, b, np.zeros((0, 0)), np.zeros((0, 2), int), 0)
+                    ka, kb = (len(u.indices) if u is not None else 0 for u in (unique[a], unique[b]))
+                    agreements[(a, b)] = PairAgreement(a, b, np.zeros((ka, kb)), np.zeros((0, 2), int), 0)
                     continue
                 ag = agreement(unique[a].unique_spectra, unique[b].unique_spectra, config.theta, a=a, b=b)
                 agreements[(a, b)] = ag

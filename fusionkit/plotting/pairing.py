@@ -14,6 +14,16 @@ __all__ = ["plot_rho_matrix", "agreement_curves", "plot_agreement_curves", "plot
            "plot_fusion_plan", "plot_rho_overview", "plot_pairing", "plot_matches"]
 
 
+def _all_unique(unique_list) -> None:
+    """Refuse a list with a map the paper's method left out unscanned (``MergeResult.unique``
+    holds None for it): name it instead of failing on it."""
+    gone = [k + 1 for k, u in enumerate(unique_list) if u is None]
+    if gone:
+        raise InputError(f"map{'s' if len(gone) > 1 else ''} {', '.join(map(str, gone))} "
+                         f"{'have' if len(gone) > 1 else 'has'} no unique poses (left out of the "
+                         "merge unscanned, see its reason); plot the others")
+
+
 def plot_rho_matrix(ax, unique_list, names, *, theta: float | None = None, title: str | None = None):
     """Pearson's rho (eq. 2) between every two unique poses of all robots, as a heat map.
 
@@ -26,6 +36,7 @@ def plot_rho_matrix(ax, unique_list, names, *, theta: float | None = None, title
     """
     from ..pairing import pearson_matrix
 
+    _all_unique(unique_list)
     spectra = [u.unique_spectra for u in unique_list]
     S = np.concatenate(spectra)
     rho = pearson_matrix(S, S)
@@ -61,6 +72,7 @@ def agreement_curves(unique_list, thetas):
     Returns ``{(a, b): counts}`` with ``counts[i]`` the number of pairs with ``rho > thetas[i]``.
     """
     from ..pairing import agreement
+    _all_unique(unique_list)
 
     out = {}
     t = np.asarray(thetas, float)
@@ -181,6 +193,7 @@ def plot_pairing(unique_list, names, theta: float):
     (right)."""
     from ..pairing import agreement, fusion_order
 
+    _all_unique(unique_list)
     n = len(unique_list)
     counts = np.zeros((n, n), int)
     for a in range(n):
