@@ -29,6 +29,8 @@ import contextvars
 import logging
 import multiprocessing
 import os
+import signal
+import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from typing import Any, Callable, Iterator, Sequence
 
@@ -198,8 +200,19 @@ class LocalProcesses(Executor):
             self._pool_shared = None
 
 
+class _NotCancelled(logging.Filter):
+    """Drops a Dask worker's warning that a task ended cancelled: a run stopped by Ctrl-C
+    cancels the tasks in flight on purpose, and its one line says so."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "CancelledError" not in record.getMessage()
+
+
 def _dask_call(fn, shared, task):
     worker_setup()
+    log = logging.getLogger("distributed.worker.state_machine")
+    if not any(isinstance(f, _NotCancelled) for f in log.filters):
+        log.addFilter(_NotCancelled())
     return fn(shared, task)
 
 
@@ -271,10 +284,20 @@ class DaskExecutor(Executor):
                     dashboard = False
             # everything on the loopback interface, on free ports (the scheduler's small HTTP
             # server too, which serves the dashboard when asked for and bokeh is installed)
-            self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                         host="127.0.0.1", dashboard_address="127.0.0.1:0",
-                                         worker_dashboard_address=None,
-                                         scheduler_kwargs={"dashboard": bool(dashboard)})
+            # the worker processes start with Ctrl-C ignored (a disposition they inherit): a
+            # Ctrl-C at the terminal reaches every process of its group, and this process, not
+            # each worker, is the one to stop the run and close the cluster
+            main = threading.current_thread() is threading.main_thread()
+            before = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+            try:
+                self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
+                                             processes=True, host="127.0.0.1",
+                                             dashboard_address="127.0.0.1:0",
+                                             worker_dashboard_address=None,
+                                             scheduler_kwargs={"dashboard": bool(dashboard)})
+            finally:
+                if main and before is not None:
+                    signal.signal(signal.SIGINT, before)
             self._client = Client(self._cluster, set_as_default=False)
             self._dashboard = bool(dashboard)
 

@@ -183,3 +183,38 @@ def test_progress_bar_shows_rate_and_time_left_on_a_terminal_only():
     assert pipe.getvalue() == ""
     assert format_duration(42) == "42 s" and format_duration(185) == "3:05"
     assert format_duration(3723) == "1:02:03"
+
+
+def test_ctrl_c_at_the_terminal_stops_a_dask_run_with_one_line(tmp_path):
+    """Ctrl-C at a terminal reaches every process of its group, the cluster's workers too: the
+    run ends with its one line and exit 130, no worker's traceback or warning, no worker left."""
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ, NUMBA_THREADING_LAYER="threadsafe")
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from fusionkit.cli import main; "
+                             "sys.exit(main(sys.argv[1:]))", "bench", "--worlds", "cave", "--cases", "40",
+                             "--backend", "dask", "--workers", "2", "--out", str(tmp_path / "sweep")],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True, env=env)
+    try:
+        first = proc.stderr.readline()  # "dask: 2 workers at ...": the cluster is up
+        assert first.startswith("dask:"), first
+        time.sleep(4)  # cases running on the workers
+        os.killpg(proc.pid, signal.SIGINT)
+        rest = proc.stderr.read()
+        assert proc.wait(timeout=60) == 130
+        left = True
+        for _ in range(100):  # the workers go with the cluster, closed on the way out
+            try:
+                os.killpg(proc.pid, 0)
+            except ProcessLookupError:
+                left = False
+                break
+            time.sleep(0.1)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    assert rest.strip().splitlines() == ["fusionkit bench: interrupted; no output was left half-written"], rest
+    assert not left, "a process of the run outlived it by 10 s"

@@ -78,10 +78,32 @@ def test_settings_take_map_merge_defaults_and_init_poses():
     ({"method": "magic"}, "parameter method: 'magic' is not a method"),
     ({"min_confidence": 1.5}, "parameter min_confidence: expected a number between 0 and 1"),
     ({"/r1/map_merge/init_pose_x": 1.0}, "give /r1/map_merge/init_pose_y, /r1/map_merge/init_pose_yaw"),
+    ({"merged_map_topic": "bad topic"}, "parameter merged_map_topic: 'bad topic' is not a ROS 2 topic name"),
+    ({"robot_map_topic": "9map"}, "parameter robot_map_topic: '9map' is not a ROS 2 topic name"),
 ])
 def test_bad_parameters_say_what_to_fix(values, message):
     with pytest.raises(fk.InputError) as info:
         settings_from(values)
+    assert message in str(info.value)
+
+
+@pytest.mark.parametrize("topic, robot, message", [
+    ("a b", "robot_1", "--topic: 'a b' is not a ROS 2 topic name"),
+    ("map", "robot 1", "robot 1.yaml (its name is the robot's topic namespace): '/robot 1/map' is not"),
+])
+def test_play_refuses_a_topic_name_ros_cannot_take_before_it_starts(tmp_path, topic, robot, message):
+    from fusionkit.ros2.play import play
+    from fusionkit.worlds import default_world
+    sim = simulate(default_world(), SimulationConfig(robots=1, poses=30, seed=1))
+    write_run(sim, tmp_path / "run")
+    if robot != "robot_1":
+        for f in (tmp_path / "run").glob("robot_1.*"):
+            f.rename(f.with_name(f.name.replace("robot_1", robot)))
+        yaml = tmp_path / "run" / f"{robot}.yaml"
+        yaml.write_text(yaml.read_text().replace("robot_1.pgm", f"{robot}.pgm"))
+        (tmp_path / "run" / "truth.json").unlink()  # its robots are found by their scans
+    with pytest.raises(fk.InputError) as info:
+        play(tmp_path / "run", duration=0.0, steps=1, topic=topic, hold=0.0)
     assert message in str(info.value)
 
 

@@ -15,8 +15,9 @@ def add_executor_options(p, *, what: str) -> None:
                         f"processes, or the cluster of --scheduler). Results are the same on "
                         f"every back end")
     g.add_argument("--workers", type=int_range(1, 1024), default=None, metavar="N",
-                   help=f"run the {what} on N workers (processes; with --backend dask, a Dask "
-                        f"LocalCluster of N processes on this machine)")
+                   help=f"run the {what} on N workers (processes; with --backend inprocess, N "
+                        f"threads of this process; with --backend dask, a Dask LocalCluster of N "
+                        f"processes on this machine)")
     g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                    help=f"run the {what} on the Dask cluster whose scheduler is at this address "
                         f"(its workers need fusionkit installed)")

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-__all__ = ["parent_namespace", "append", "is_robot_map_topic", "robot_slug", "MAP_TYPE"]
+__all__ = ["parent_namespace", "append", "is_robot_map_topic", "robot_slug", "MAP_TYPE",
+           "check_topic"]
 
 #: The one message type read as a robot map.
 MAP_TYPE = "nav_msgs/msg/OccupancyGrid"
@@ -31,3 +32,18 @@ def is_robot_map_topic(topic: str, types, *, robot_map_topic: str, robot_namespa
 def robot_slug(robot: str) -> str:
     """A robot name usable inside a topic name (``"/robot1"`` -> ``"robot1"``)."""
     return robot.strip("/") or "root"
+
+
+def check_topic(what: str, name: str) -> None:
+    """Raise an InputError naming ``what`` when ``name`` (absolute, or relative to a namespace)
+    is not a valid ROS 2 topic name; nothing to check without rclpy."""
+    from .. import InputError
+    try:
+        from rclpy.validate_topic_name import validate_topic_name
+    except ImportError:
+        return
+    try:
+        validate_topic_name(name if name.startswith("/") else "/" + name)
+    except Exception as exc:  # noqa: BLE001 - rclpy's InvalidTopicNameException and its kin
+        why = str(exc).split("\n", 1)[0].replace("Invalid topic name: ", "").rstrip(":")
+        raise InputError(f"{what}: {name!r} is not a ROS 2 topic name ({why})") from None

@@ -82,6 +82,9 @@ class NodeSettings:
             raise InputError("parameter robot_map_topic: give a topic name such as 'map'")
         if not self.merged_map_topic.strip("/"):
             raise InputError("parameter merged_map_topic: give a topic name such as 'map'")
+        from ._names import check_topic
+        for name in ("robot_map_topic", "robot_map_updates_topic", "merged_map_topic"):
+            check_topic(f"parameter {name}", getattr(self, name))
         if not self.world_frame:
             raise InputError("parameter world_frame: give a frame name such as 'world'")
         if self.switch_confirmations < 1:

@@ -98,7 +98,11 @@ def play(run_dir, *, duration: float, steps: int, topic: str = "map", hold: floa
     robots = find_robots(run_dir)
     if not (duration >= 0 and math.isfinite(duration)) or steps < 1:
         raise InputError("--duration must be >= 0 s and --steps >= 1")
+    from ._names import check_topic
     from ._runtime import ros_context
+    check_topic("--topic", topic)
+    for r in robots:
+        check_topic(f"{r.name}.yaml (its name is the robot's topic namespace)", f"/{r.name}/{topic.strip('/')}")
 
     log(f"building {steps} map steps for each of {len(robots)} robots")
     plans = []
