@@ -148,6 +148,18 @@ def test_a_different_estimate_replaces_the_held_one_only_when_confidently_better
     assert d.action == "switched" and tr.held("/r")[0] == new
 
 
+def test_the_same_placement_fixed_better_on_grown_maps_replaces_the_held_one_at_once():
+    tr = _tracker()
+    old, near, worse = fk.Transform2D(1, 2, 0.1), fk.Transform2D(1.27, 2, 0.1), fk.Transform2D(0.7, 2, 0.1)
+    tr.decide("/r", old, 0.9, "", 0.1)
+    scores = {old: 0.97, near: 1.0, worse: 0.9}
+    d = tr.decide("/r", worse, 0.9, "", 0.1, score=lambda t: scores[t])
+    assert d.action == "kept" and tr.held("/r")[0] == old           # nearby but worse
+    d = tr.decide("/r", near, 0.9, "", 0.1, score=lambda t: scores[t])
+    assert d.action == "refined" and tr.held("/r")[0] == near        # 2.7 cells, better: at once
+    assert "refined at x=1.270 m" in d.line()
+
+
 def test_an_interrupted_run_of_better_estimates_starts_over():
     tr = _tracker()
     old, new = fk.Transform2D(0, 0, 0), fk.Transform2D(5, 0, 0)

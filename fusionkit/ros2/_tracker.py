@@ -4,7 +4,9 @@ A live merge re-estimates every transform every few seconds while the maps grow.
 new estimate as it comes makes the merged map jump whenever one estimate is off; the rule here
 (hysteresis) keeps the transform accepted first until a different one is *confidently better*:
 it scores higher on the current maps by ``switch_margin`` in ``switch_confirmations`` successive
-estimations that agree with each other.
+estimations that agree with each other. A new estimate near the accepted one (a few cells and
+degrees: the same placement, fixed better on the grown maps) replaces it at once when it scores
+higher.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import dataclass
 
 from .. import Transform2D
 
-__all__ = ["Decision", "Tracker", "same_place"]
+__all__ = ["Decision", "Tracker", "same_place", "near_place"]
 
 
 def same_place(a: Transform2D, b: Transform2D, resolution: float) -> bool:
@@ -23,12 +25,20 @@ def same_place(a: Transform2D, b: Transform2D, resolution: float) -> bool:
             and abs(math.remainder(a.theta - b.theta, 2 * math.pi)) <= math.radians(1.0))
 
 
+def near_place(a: Transform2D, b: Transform2D, resolution: float) -> bool:
+    """Whether two transforms are one placement fixed more or less well: within 6 cells and 2
+    degrees (the consensus method's ``distinct_cells``)."""
+    return (math.hypot(a.x - b.x, a.y - b.y) <= 6.0 * resolution
+            and abs(math.remainder(a.theta - b.theta, 2 * math.pi)) <= math.radians(2.0))
+
+
 @dataclass(frozen=True)
 class Decision:
     """The outcome of one estimation for one robot.
 
     ``action`` is one of ``"placed"`` (first accepted transform), ``"confirmed"`` (the new
-    estimate agrees with the accepted one), ``"switched"`` (a confidently better transform
+    estimate agrees with the accepted one), ``"refined"`` (a new estimate of the same
+    placement scores higher on the current maps and replaced it), ``"switched"`` (a confidently better transform
     replaced it), ``"kept"`` (a different estimate was not better enough, or the method
     refused to place the robot this time), ``"not placed"``; ``transform`` and ``confidence``
     are what the node now holds (None / 0 when not placed); ``why`` says why in words.
@@ -129,6 +139,12 @@ class Tracker:
         s_new = s_old = None
         if score is not None:
             s_new, s_old = float(score(estimate)), float(score(held.transform))
+        if s_new is not None and s_new > s_old and near_place(estimate, held.transform, resolution):
+            self._pending.pop(robot, None)
+            self._held[robot] = _Held(estimate, confidence)
+            return Decision(robot, "refined", estimate, confidence,
+                            f"the same placement fixed better: scores {s_new:.2f} against "
+                            f"{s_old:.2f} on the current maps")
         if s_new is None or s_new < s_old + self.switch_margin:
             self._pending.pop(robot, None)
             why = ("a different estimate was found" if s_new is None else

@@ -324,12 +324,13 @@ class MergeNode:
             changed = False
             for d in decisions:
                 r = self.robots[d.robot]
-                if (d.action, d.why) != (r.last_action, r.last_why) or d.action in ("placed", "switched"):
+                moved = d.action in ("placed", "switched", "refined")
+                if (d.action, d.why) != (r.last_action, r.last_why) or moved:
                     self.log.info(d.line())
                 else:
                     self.log.debug(d.line())
                 r.last_action, r.last_why = d.action, d.why
-                if d.action in ("placed", "switched"):
+                if moved:
                     changed = True
                     self._publish_pose(r)
             if changed:
