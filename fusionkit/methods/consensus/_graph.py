@@ -295,9 +295,9 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
         mine = [p for p in pairs.values() if k in (p.a, p.b)]
         if group[k] is not None:
             root = min(m for m in range(n) if group[m] == group[k])
-            reasons.append(f"placed in group {group[k]} with {len([m for m in range(n) if group[m] == group[k]]) - 1} "
-                           f"other map(s) (frame of map {root + 1}); no confident link joins that "
-                           "group to the reference's")
+            others = len([m for m in range(n) if group[m] == group[k]]) - 1
+            reasons.append(f"no confident link joins it to the reference's maps; it is placed in "
+                           f"group {group[k]} with {others} other map(s) (frame of map {root + 1})")
         elif any(k in e for e in demoted if e not in edges):
             reasons.append("its structure repeats (it fits another map in several places) and no "
                            "loop through a third map confirms its one fit")
