@@ -311,6 +311,15 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
     return out
 
 
+def _unusable(grid: OccupancyGrid) -> str:
+    """Why no method can place ``grid`` (the same words whatever the method), or ``""``."""
+    if not grid.known_mask().any():
+        return "it holds no known cell (all unknown): nothing to place it by"
+    if not grid.occupied_mask().any():
+        return "it holds no wall (occupied cell) to place it by"
+    return ""
+
+
 def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
           config: MergeConfig = MergeConfig(),
           callback: Callable[[MergeEvent], bool | None] | None = None) -> MergeResult:
@@ -387,7 +396,8 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     seconds["total"] = time.perf_counter() - t_start
     placements = tuple(
         MapPlacement(k, names[k], p.transform is not None, p.transform, float(p.confidence),
-                     int(p.overlap_cells), "" if p.transform is not None else p.reason,
+                     int(p.overlap_cells),
+                     "" if p.transform is not None else (_unusable(grids[k]) or p.reason),
                      group=p.group, group_transform=p.group_transform,
                      group_reference=p.group_reference, rivals=p.rivals, residual=p.residual)
         for k, p in enumerate(placed.placements))

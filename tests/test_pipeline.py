@@ -199,8 +199,18 @@ def test_a_map_of_another_resolution_with_no_known_cell_is_refused_with_its_reas
     blank = OccupancyGrid(np.full((300, 200), -1, np.int8), 0.05, (1.0, 2.0, 0.0), "blank")
     res = merge([sim.robots[0].grid, blank], config=MergeConfig(method="consensus", seed=2))
     p = res.placements[1]
-    assert not p.merged and "blank holds no occupied cell" in p.reason
+    assert not p.merged and "no known cell (all unknown)" in p.reason
     assert res.grid.resolution == sim.robots[0].grid.resolution
+
+
+@pytest.mark.parametrize("method", ["consensus", "spectral-pso", "map-merge", "fourier-mellin",
+                                    "hough-spectrum"])
+def test_a_map_without_walls_is_left_out_in_the_same_words_by_every_method(sim, method):
+    from fusionkit.grid import OccupancyGrid
+    free = OccupancyGrid(np.zeros((80, 80), np.int8), sim.robots[0].grid.resolution, (0.0, 0.0, 0.0), "free")
+    res = merge([sim.robots[0].grid, free], config=MergeConfig(method=method, seed=2))
+    p = res.placements[1]
+    assert not p.merged and p.reason == "it holds no wall (occupied cell) to place it by"
 
 
 def _unscannable(kind, run_dir, d):
