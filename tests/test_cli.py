@@ -93,3 +93,16 @@ def test_an_unknown_option_is_named_by_the_command_it_was_given_to(capsys, argv,
     err = capsys.readouterr().err
     assert err.startswith(f"usage: {command} ")
     assert err.strip().splitlines()[-1] == f"{command}: error: unrecognized arguments: --bogus"
+
+
+@pytest.mark.parametrize("argv, command", [
+    (["ros2", "play", "no_such_run"], "fusionkit ros2 play"),
+    (["import", "carmen", "no_such.log", "--out", "d"], "fusionkit import carmen"),
+    (["evaluate", "no_such.yaml", "--truth", "t.json"], "fusionkit evaluate"),
+])
+def test_an_error_is_named_by_the_command_that_met_it_as_its_usage_errors_are(tmp_path, capsys,
+                                                                              monkeypatch, argv, command):
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"{command}: error: ") and err.count("\n") == 1, err

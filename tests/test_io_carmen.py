@@ -295,4 +295,4 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, case):
         return
     assert _main(["import", "carmen", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("fusionkit import: error: ")
+    assert len(err) == 1 and err[0].startswith("fusionkit import carmen: error: ")

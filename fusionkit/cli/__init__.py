@@ -87,7 +87,9 @@ def main(argv=None) -> int:
         args, extra = parser.parse_known_args(argv)
         if extra:   # said by the (sub)command they were given to, with its usage
             _innermost(parser, args, argv, extra).error(f"unrecognized arguments: {' '.join(extra)}")
-        command = f"fusionkit {args.command}"
+        # named as its parser names it in a usage error: "fusionkit import carmen"
+        command = " ".join(["fusionkit", args.command] + [
+            str(v) for v in (getattr(args, k, None) for k in ("kind", "ros2_command")) if v])
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM as _signals.Terminated
         _quiet_signals()
