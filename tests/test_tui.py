@@ -524,3 +524,11 @@ async def test_m_shows_the_fused_map_on_the_whole_screen(in_root):
         await pilot.press("escape")
         await pilot.pause()
         assert not isinstance(app.screen, MapScreen)
+
+
+def test_the_info_line_of_a_map_says_how_a_map_without_scans_is_placed():
+    from fusionkit_tui.widgets.map_picker import format_info
+    info = {"name": "r", "cols": 40, "rows": 30, "resolution": 0.1, "width_m": 4.0, "height_m": 3.0}
+    assert format_info({**info, "has_scans": True}).endswith("scans: yes")
+    line = format_info({**info, "has_scans": False})
+    assert "placed by its walls" in line and "spectral-pso casts virtual scans" in line

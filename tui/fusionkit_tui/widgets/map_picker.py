@@ -25,7 +25,8 @@ __all__ = ["MapTree", "SelectedMaps", "MapsPane", "format_info"]
 
 def format_info(info: dict) -> str:
     """One line about a map file, from :func:`fusionkit.mapio.map_info`."""
-    scans = "scans: yes" if info["has_scans"] else "scans: none (virtual scans will be cast)"
+    scans = ("scans: yes" if info["has_scans"] else
+             "scans: none (placed by its walls; spectral-pso casts virtual scans)")
     return (f"{info['name']}: {info['cols']} x {info['rows']} cells, {info['resolution']:g} m/cell "
             f"({info['width_m']:.1f} x {info['height_m']:.1f} m), {scans}")
 
