@@ -367,7 +367,7 @@ def test_cli_bad_input_exits_2_with_one_line(run_dir, tmp_path, capsys, case):
     }[case]
     assert _main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith(f"fusionkit {argv[0]}: error: ")
+    assert len(err) == 1 and err[0].startswith(f"fusionkit {argv[0]} rosbag: error: ")
     if case == "topic":
         assert "/robot_1/scan (sensor_msgs/msg/LaserScan)" in err[0]
     assert not (tmp_path / "o").exists() and not (tmp_path / "x").exists()
