@@ -532,3 +532,25 @@ def test_the_info_line_of_a_map_says_how_a_map_without_scans_is_placed():
     assert format_info({**info, "has_scans": True}).endswith("scans: yes")
     line = format_info({**info, "has_scans": False})
     assert "placed by its walls" in line and "spectral-pso casts virtual scans" in line
+
+
+@pytest.mark.parametrize("method, cells, words", [
+    ("spectral-pso", 812, "81% of 812 overlapping wall cells agree with the maps fused before it"),
+    ("spectral-pso", 0, "the first map of the fusion order"),
+    ("consensus", 3211, "confidence 0.81: the chance that no wrong placement of these maps fits as well"),
+    ("map-merge", 0, "confidence 0.81 by the consensus test"),
+])
+def test_why_a_map_was_merged_is_said_in_the_terms_of_its_method(method, cells, words):
+    from types import SimpleNamespace
+
+    from fusionkit_tui.widgets.result_panel import merged_because
+    assert words in merged_because(SimpleNamespace(confidence=0.81, overlap_cells=cells), method)
+
+
+async def test_ctrl_c_quits_with_the_exit_status_of_an_interrupt(in_root):
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        await pilot.press("ctrl+c")
+        await pilot.pause()
+    assert app.return_code == 130 and not app.is_running

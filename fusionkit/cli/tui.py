@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 from ..errors import InputError
 
 
@@ -29,4 +31,6 @@ def run(args) -> int:
                          f"dependencies (textual, textual-plotext)") from None
     app = make_app(args.paths)
     app.run()
+    if app.return_code == 130:  # Ctrl-C: one line, as every command says it
+        print("fusionkit tui: interrupted; no output was left half-written", file=sys.stderr)
     return int(app.return_code or 0)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Sequence
 
 from textual.app import App
+from textual.binding import Binding
 
 from .runner import initial_selection
 from .screens.main import MainScreen
@@ -31,12 +32,18 @@ class FusionkitApp(App):
     SUB_TITLE = "multi-robot map fusion"
     CSS_PATH = "app.tcss"
     ENABLE_COMMAND_PALETTE = False
-    BINDINGS = [("ctrl+q", "quit", "Quit")]
+    #: Ctrl-C quits as in every other command (exit status 130), not Textual's hint to press q
+    BINDINGS = [("ctrl+q", "quit", "Quit"),
+                Binding("ctrl+c", "interrupt", "Quit", show=False, priority=True)]
 
     def __init__(self, root: Path, selected: Sequence[Path] = ()) -> None:
         super().__init__()
         self._root = Path(root)
         self._selected = [Path(p) for p in selected]
+
+    def action_interrupt(self) -> None:
+        """Quit at once, a running merge with it, with the exit status of an interrupt."""
+        self.exit(return_code=130)
 
     def get_default_screen(self) -> MainScreen:
         return MainScreen(self._root, self._selected)

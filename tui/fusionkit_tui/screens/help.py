@@ -18,10 +18,11 @@ KEYS = (
         ("r  ctrl+r", "run the merge (ctrl+r also while typing a setting)"),
         ("escape", "cancel the running merge"),
         ("e", "export the merged map (YAML + PGM) and the report"),
-        ("m", "the fused (on Maps: the previewed) map on the whole screen"),
+        ("m", "the fused (on Maps: previewed) map, full screen"),
         ("? f1", "this help"),
         ("tab shift+tab", "move between the parts of a tab"),
         ("q  ctrl+q", "quit (a running merge is cancelled)"),
+        ("ctrl+c", "quit the same way, with exit status 130"),
     )),
     ("Maps: directory tree", (
         ("up down", "move; a highlighted map is previewed"),

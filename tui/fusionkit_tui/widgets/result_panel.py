@@ -19,6 +19,19 @@ from .map_preview import MapPreview, robot_colour
 __all__ = ["ResultPanel"]
 
 
+def merged_because(p, method: str) -> str:
+    """Why a merged map was taken, in the terms of the method that placed it."""
+    if method == "spectral-pso":
+        if p.overlap_cells > 0:
+            return (f"{100 * p.confidence:.0f}% of {p.overlap_cells} overlapping wall cells agree "
+                    "with the maps fused before it")
+        return "the first map of the fusion order (the reference was aligned to it)"
+    if method == "consensus":
+        return (f"confidence {p.confidence:.2f}: the chance that no wrong placement of these maps "
+                "fits as well")
+    return f"confidence {p.confidence:.2f} by the consensus test (one 0-1 scale for every method)"
+
+
 class ResultPanel(Vertical):
     """Shows a :class:`~fusionkit.pipeline.MergeResult` (and its evaluation, if any)."""
 
@@ -181,8 +194,7 @@ class ResultPanel(Vertical):
         if p.index == self._result.config.reference:
             why.update(f"{name}: the reference; the merged map is in its frame")
         elif p.merged:
-            why.update(f"{name}: merged, {100 * p.confidence:.0f}% of {p.overlap_cells} "
-                       f"overlapping wall cells agree")
+            why.update(f"{name}: merged, {merged_because(p, self._result.config.method)}")
         else:
             why.update(Text(f"{name}: not merged: {p.reason}", style="yellow"))
 
