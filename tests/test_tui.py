@@ -554,3 +554,18 @@ async def test_ctrl_c_quits_with_the_exit_status_of_an_interrupt(in_root):
         await pilot.press("ctrl+c")
         await pilot.pause()
     assert app.return_code == 130 and not app.is_running
+
+
+async def test_the_false_merge_risk_of_the_consensus_method_is_a_setting(in_root):
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        form = app.main.settings
+        assert form.config().max_false_merge == MergeConfig().max_false_merge
+        form.set_value("max_false_merge", "0.001")
+        await pilot.pause()
+        assert form.config().max_false_merge == 0.001
+        form.set_value("max_false_merge", "1")
+        await pilot.pause()
+        with pytest.raises(InputError, match="merge risk"):
+            form.config()

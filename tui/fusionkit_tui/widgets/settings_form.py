@@ -66,20 +66,24 @@ def _settings() -> tuple[Setting, ...]:
     inf = math.inf
     return (
         Setting("theta", "theta", "float", -1, 1, d.theta,
-                "Pearson rho above which two unique poses agree (eq. 2)"),
+                "spectral-pso: Pearson rho above which two unique poses agree (eq. 2)"),
         Setting("unique_count", "unique poses", "int", 1, 100000, d.unique_count,
-                "unique poses per robot (Algorithm 1); sets delta"),
+                "spectral-pso: unique poses per robot (Algorithm 1); sets delta"),
         Setting("delta", "delta", "float", 0, inf, None,
-                "fixed divergence threshold (m x beams); blank: from unique poses", optional=True),
+                "spectral-pso: fixed divergence threshold (m x beams); blank: from unique poses",
+                optional=True),
         Setting("sub_sec", "sub-section", "int", 1, 1000, d.sub_sec,
-                "half-width of Algorithm 1's sections (poses)"),
-        Setting("particles", "particles", "int", 1, 10000, p.particles, "PSO swarm size"),
-        Setting("iterations", "iterations", "int", 0, 100000, p.iterations, "PSO iterations (at most)"),
-        Setting("w", "w", "float", 0, 10, p.w, "PSO inertia weight"),
-        Setting("c1", "c1", "float", 0, 10, p.c1, "PSO cognitive coefficient"),
-        Setting("c2", "c2", "float", 0, 10, p.c2, "PSO social coefficient"),
+                "spectral-pso: half-width of Algorithm 1's sections (poses)"),
+        Setting("particles", "particles", "int", 1, 10000, p.particles, "spectral-pso: PSO swarm size"),
+        Setting("iterations", "iterations", "int", 0, 100000, p.iterations,
+                "spectral-pso: PSO iterations (at most)"),
+        Setting("w", "w", "float", 0, 10, p.w, "spectral-pso: PSO inertia weight"),
+        Setting("c1", "c1", "float", 0, 10, p.c1, "spectral-pso: PSO cognitive coefficient"),
+        Setting("c2", "c2", "float", 0, 10, p.c2, "spectral-pso: PSO social coefficient"),
         Setting("accept", "accept", "float", 0, 1, d.accept,
-                "least wall agreement for a map to be merged (fraction)"),
+                "spectral-pso: least wall agreement for a map to be merged (fraction)"),
+        Setting("max_false_merge", "merge risk", "float", 1e-300, 0.999, d.max_false_merge,
+                "consensus: the false-merge risk accepted (--max-false-merge)"),
         Setting("seed", "seed", "int", 0, 2**63 - 1, d.seed, "seed of every random step"),
     )
 
@@ -206,8 +210,8 @@ class SettingsForm(VerticalScroll, can_focus=True):
                 yield Static(f"default {default}: {s.help}", id=f"hint-{s.key}", classes="hint")
             yield Label("seeding")
             yield Checkbox("on", MergeConfig().alignment.seeded, id="seeding", compact=True)
-            yield Static("default on: start the swarm also at the transforms of matched scans; "
-                         "off: the paper's blind search", classes="hint")
+            yield Static("default on: spectral-pso starts the swarm also at the transforms of "
+                         "matched scans; off: the paper's blind search", classes="hint")
         yield Static(_NOTE, id="settings-note")
 
     def on_descendant_focus(self, event) -> None:
@@ -324,7 +328,8 @@ class SettingsForm(VerticalScroll, can_focus=True):
         v = self.values()
         cfg = MergeConfig(method=v["method"], theta=v["theta"], unique_count=v["unique_count"],
                           delta=v["delta"], sub_sec=v["sub_sec"], accept=v["accept"],
-                          reference=reference, seed=v["seed"])
+                          reference=reference, seed=v["seed"],
+                          max_false_merge=v["max_false_merge"])
         cfg = cfg.with_pso(particles=v["particles"], iterations=v["iterations"], w=v["w"],
                            c1=v["c1"], c2=v["c2"])
         if v["seeded"] != cfg.alignment.seeded:
