@@ -569,3 +569,25 @@ async def test_the_false_merge_risk_of_the_consensus_method_is_a_setting(in_root
         await pilot.pause()
         with pytest.raises(InputError, match="merge risk"):
             form.config()
+
+
+async def test_a_map_removed_from_the_selection_is_no_longer_previewed(in_root):
+    app = make_app(["run/robot_1.yaml", "run/robot_2.yaml"])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        maps = app.main.maps
+        table = maps.query_one("#selected", DataTable)
+        preview = maps.query_one("#preview")
+        table.focus()
+        table.move_cursor(row=1)
+        await until(pilot, lambda: "robot_2" in maps.previewing_label())
+        await pilot.press("x")  # the last row goes: the row now under the cursor is shown
+        await until(pilot, lambda: len(maps.selected) == 1)
+        await until(pilot, lambda: "robot_1" in maps.previewing_label() and preview.grid is not None)
+        info = str(maps.query_one("#info").render())
+        assert "robot_1" in info and "robot_2" not in info
+        await pilot.press("x")  # none left: nothing is previewed, and the pane says so
+        await until(pilot, lambda: not maps.selected)
+        await until(pilot, lambda: preview.grid is None)
+        assert maps.previewing_label() == ""
+        assert "robot_" not in str(maps.query_one("#info").render())

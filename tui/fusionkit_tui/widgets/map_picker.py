@@ -292,7 +292,7 @@ class MapsPane(Vertical):
         if self._entries:
             self._preview(self._entries[0][0])
         else:
-            self.query_one(MapPreview).clear("no map selected: highlight or select a .yaml")
+            self._preview_nothing()
 
     # -- selection -------------------------------------------------------------------------------
     def _info(self, path: Path) -> dict:
@@ -396,6 +396,7 @@ class MapsPane(Vertical):
     def clear_selection(self) -> None:
         self._entries.clear()
         self._changed()
+        self._preview_nothing()
 
     @on(MapTree.Toggle)
     def _on_toggle(self, event: MapTree.Toggle) -> None:
@@ -415,6 +416,8 @@ class MapsPane(Vertical):
         if 0 <= event.index < len(self._entries):
             del self._entries[event.index]
             self._changed()
+            if not self._entries:  # no row is left to highlight, so none shows the map removed
+                self._preview_nothing()
 
     @on(SelectedMaps.MakeReference)
     def _on_reference(self, event: SelectedMaps.MakeReference) -> None:
@@ -488,6 +491,11 @@ class MapsPane(Vertical):
         labels = map_labels([*self.selected, path])
         self.query_one("#info", Static).update(format_info({**info, "name": labels[-1]}))
         self.query_one(MapPreview).show(grid)
+
+    def _preview_nothing(self) -> None:
+        self._previewing = None
+        self.query_one("#info", Static).update("")
+        self.query_one(MapPreview).clear("no map selected: highlight or select a .yaml")
 
     def _show_error(self, path: Path, message: str) -> None:
         if self._previewing is not None and self._previewing.resolve() == path.resolve():
