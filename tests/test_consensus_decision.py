@@ -577,6 +577,19 @@ def test_the_wider_search_does_not_lay_an_office_window_in_the_warehouse():
     assert loose.placements[1].merged
 
 
+def test_the_pairs_of_the_wider_search_count_on_in_the_progress():
+    """The pair of the office window and the warehouse exploration is refused, then searched
+    again over every rotation: a progress bar that watches the pairs sees the count run on (1
+    of 2, not 0 of 1 again), never back."""
+    office = _builtin_case(8, "office", "crop", 5, 1985194319)
+    warehouse = _builtin_case(8, "warehouse", "explore", 2, 1504825736)
+    seen = []
+    merge([office.grids[0], warehouse.grids[1]], scans=[office.scans[0], warehouse.scans[1]],
+          config=MergeConfig(method="consensus", seed=7548),
+          callback=lambda ev: seen.append((ev.step, ev.total)) if ev.stage == "align" else None)
+    assert seen == [(0, 1), (1, 2)], seen
+
+
 def _hall(resolution: float, cross: bool) -> OccupancyGrid:
     """A corridor 20 m long and 2 m wide, all of it seen; with ``cross``, a wall 3 m long across
     it at 12 m (a dead end with a gap to pass)."""

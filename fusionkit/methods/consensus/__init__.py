@@ -178,7 +178,10 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
         Seed of the random steps (virtual scans, the optional swarm polish).
     callback : callable(stage, step, total, pair), optional
         Called, in the calling thread, as each map is prepared (``"scans"``) and each pair is
-        estimated (``"align"``, with ``pair = (i, j)``).
+        estimated (``"align"``, with ``pair = (i, j)``). The pairs are counted over the whole
+        merge: a fleet's pairs added after the first candidates and the pairs of a map left
+        out searched again over every rotation raise ``total`` and ``step`` counts on, so that
+        ``step`` never goes back.
 
     executor : fusionkit.executor.Executor, optional
         Where the pairs are estimated (default: the one set by
@@ -233,13 +236,20 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
         ex = ex if ex is not None else InProcess(workers)
         shared = (indexes, hists, evidence, trees, config)
 
+        counted = [0]  # pairs estimated before this call: the count runs on over every call
+
         def estimate(todo, exhaustive=False):
+            before = counted[0]
+
             def progress(done, total):
-                # as before: step = pairs finished, pair = the next one in order
+                # step = pairs finished, pair = the next one in order; a fleet's later pairs
+                # and the wider search of a map left out count on from the pairs before them
                 if callback is not None and done < total:
-                    callback("align", done, total, todo[done])
+                    callback("align", before + done, before + total, todo[done])
             tasks = [(i, j, seed, exhaustive) for i, j in todo]
-            return dict(zip(todo, ex.map(_pair_task, tasks, shared=shared, progress=progress)))
+            out = dict(zip(todo, ex.map(_pair_task, tasks, shared=shared, progress=progress)))
+            counted[0] += len(todo)
+            return out
 
         t0 = time.perf_counter()
         pairs = estimate_fleet(estimate, indexes, hists, config.candidates)
