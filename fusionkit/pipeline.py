@@ -36,7 +36,7 @@ from .methods import METHODS, get_method
 from .methods.base import MergeEvent, MergeStep, PreparedMaps
 from .methods.consensus import ConsensusConfig
 from .pairing import FusionPlan
-from .pso import PSOConfig
+from .pso import PSOConfig, _is_int
 from .resample import canvas_for, resample, transformed_bounds
 from .scanlog import ScanLog, load_scans, scans_path_for
 from .transform import Transform2D
@@ -119,6 +119,12 @@ class MergeConfig:
             raise InputError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
         if not -1.0 <= self.theta <= 1.0:
             raise InputError(f"theta is a Pearson correlation threshold in [-1, 1], got {self.theta}")
+        if not (_is_int(self.seed) and 0 <= self.seed < 2**63):
+            raise InputError(f"seed must be a whole number in [0, 2^63 - 1], got {self.seed!r}")
+        if self.delta is not None and not (isinstance(self.delta, (int, float))
+                                           and not isinstance(self.delta, bool)
+                                           and 0.0 <= self.delta < math.inf):
+            raise InputError(f"delta is a divergence threshold >= 0 (or None), got {self.delta!r}")
         if self.delta is None and self.unique_count < 1:
             raise InputError(f"unique_count must be >= 1, got {self.unique_count}")
         if not 0.0 <= self.accept <= 1.0:

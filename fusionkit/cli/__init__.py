@@ -46,13 +46,22 @@ def _command_of(argv) -> str | None:
     return None
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, ending with where the options are
+    explained (its subcommands' parsers are of this class too)."""
+
+    def error(self, message: str):
+        _say(f"{self.prog}: error: {_one_line(message)}; see {self.prog} --help")
+        raise SystemExit(2)
+
+
 def build_parser(argv=None) -> argparse.ArgumentParser:
     """The parser of the command line.
 
     With ``argv``, only the subcommand it names is set up in full (the others are listed by
     name and help); without, every subcommand is.
     """
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="fusionkit",
         description="Multi-robot occupancy-grid map fusion: simulate robots, find the rigid\n"
                     "transforms between their maps, fuse them and measure the result.\n"
@@ -85,7 +94,7 @@ def main(argv=None) -> int:
         argv = sys.argv[1:] if argv is None else list(argv)
         parser = build_parser(argv)
         args, extra = parser.parse_known_args(argv)
-        if extra:   # said by the (sub)command they were given to, with its usage
+        if extra:   # said by the (sub)command they were given to
             _innermost(parser, args, argv, extra).error(f"unrecognized arguments: {' '.join(extra)}")
         # named as its parser names it in a usage error: "fusionkit import carmen"
         command = " ".join(["fusionkit", args.command] + [

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import textwrap
 import time
@@ -93,7 +94,7 @@ def add_merge_options(p, method: str | None = None, *, seed_flag: str = "--seed"
                    help=f"consensus: the false-merge risk accepted, the expected number of wrong "
                         f"placements that would fit as well as one accepted (default "
                         f"{d.max_false_merge:g}; smaller is safer and merges less)")
-    g.add_argument(seed_flag, dest="seed", type=int, default=d.seed,
+    g.add_argument(seed_flag, dest="seed", type=int_range(0, 2**63 - 1), default=d.seed,
                    help=f"seed of every random step{' of the merge' if seed_flag != '--seed' else ''} "
                         f"(default {d.seed})")
     g.add_argument("--theta", type=float_range(-1, 1), default=d.theta,
@@ -101,7 +102,7 @@ def add_merge_options(p, method: str | None = None, *, seed_flag: str = "--seed"
     g.add_argument("--unique-count", type=int_range(1, 100000), default=d.unique_count,
                    help=f"unique poses per robot; delta is set to give this many "
                         f"(Algorithm 1; default {d.unique_count})")
-    g.add_argument("--delta", type=float, default=None,
+    g.add_argument("--delta", type=float_range(0, math.inf), default=None,
                    help="fixed divergence threshold of Algorithm 1 (spectrum units: m x beams); "
                         "overrides --unique-count")
     g.add_argument("--sub-sec", type=int_range(1, 1000), default=d.sub_sec,
