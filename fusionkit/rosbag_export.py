@@ -15,6 +15,7 @@ import math
 import os
 import re
 import shutil
+import sqlite3
 import tempfile
 from collections import Counter
 from dataclasses import dataclass
@@ -262,7 +263,11 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
     tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
     try:
         tmp = tmpdir / out.name
-        result = _write_bag(tmp, robots, ros1, storage, rate, start_s, progress)
+        try:
+            result = _write_bag(tmp, robots, ros1, storage, rate, start_s, progress)
+        except sqlite3.Error as exc:  # the ROS 2 sqlite3 storage: "database or disk is full"
+            raise InputError(f"{out}: the bag could not be written ({exc}); check the free disk "
+                             f"space and the folder's permissions") from None
         if out.exists():
             raise InputError(f"{out} appeared while the bag was written; it was left as it was")
         if ros1:

@@ -352,7 +352,8 @@ def test_cli_export_and_import(run_dir, tmp_path, capsys):
     np.testing.assert_array_equal(got.ranges, load_scans(run_dir / "robot_2.scans.npz").ranges)
 
 
-@pytest.mark.parametrize("case", ["topic", "bag", "export_exists", "export_ros1_name"])
+@pytest.mark.parametrize("case", ["topic", "bag", "export_exists", "export_ros1_name",
+                                  "export_ros1_storage", "export_ros1_format_storage"])
 def test_cli_bad_input_exits_2_with_one_line(run_dir, tmp_path, capsys, case):
     bag = tmp_path / "b"
     export_rosbag(run_dir, bag)
@@ -364,6 +365,12 @@ def test_cli_bad_input_exits_2_with_one_line(run_dir, tmp_path, capsys, case):
         "export_exists": ["export", "rosbag", str(run_dir), "--out", str(bag)],
         "export_ros1_name": ["export", "rosbag", str(run_dir), "--out", str(tmp_path / "x"),
                              "--format", "ros1"],
+        # a ROS 1 bag has no storage plugin: the option is not ignored, it is refused
+        "export_ros1_storage": ["export", "rosbag", str(run_dir), "--out", str(tmp_path / "x.bag"),
+                                "--storage", "mcap"],
+        "export_ros1_format_storage": ["export", "rosbag", str(run_dir), "--out",
+                                       str(tmp_path / "x.bag"), "--format", "ros1",
+                                       "--storage", "sqlite3"],
     }[case]
     assert _main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -371,3 +378,29 @@ def test_cli_bad_input_exits_2_with_one_line(run_dir, tmp_path, capsys, case):
     if case == "topic":
         assert "/robot_1/scan (sensor_msgs/msg/LaserScan)" in err[0]
     assert not (tmp_path / "o").exists() and not (tmp_path / "x").exists()
+    assert not (tmp_path / "x.bag").exists()
+    if case.endswith("storage"):
+        assert "--storage" in err[0] and "ROS 1" in err[0]
+
+
+def test_cli_export_on_a_full_disk_is_one_line_and_leaves_nothing(run_dir, tmp_path, capsys,
+                                                                  monkeypatch):
+    """The ROS 2 sqlite3 storage reports a full disk as an sqlite3 error, not an OS error."""
+    import sqlite3
+
+    import fusionkit.io_rosbag as io_rosbag
+    real = io_rosbag._MsgFactory.scan
+    calls = []
+
+    def full(self, *a, **k):
+        calls.append(1)
+        if len(calls) > 5:
+            raise sqlite3.OperationalError("database or disk is full")
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(io_rosbag._MsgFactory, "scan", full)
+    assert _main(["export", "rosbag", str(run_dir), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fusionkit export rosbag: error: "), err
+    assert "disk is full" in err[0] and "free disk space" in err[0]
+    assert list(tmp_path.iterdir()) == []

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
+from ..errors import InputError
 from ..io_rosbag import export_rosbag
 from ._common import Progress, float_range, paragraphs
 
@@ -34,8 +35,8 @@ def register(sub) -> None:
                         "RUN_DIR.bag or RUN_DIR_bag beside the run directory)")
     b.add_argument("--format", dest="fmt", choices=("ros2", "ros1"), default=None,
                    help="bag format (default: ros1 when --out ends in .bag, else ros2)")
-    b.add_argument("--storage", choices=("sqlite3", "mcap"), default="sqlite3",
-                   help="ROS 2 storage plugin (default: %(default)s)")
+    b.add_argument("--storage", choices=("sqlite3", "mcap"), default=None,
+                   help="ROS 2 storage plugin (default: sqlite3)")
     b.add_argument("--rate", type=float_range(0.0, 10000.0, lo_open=True), default=10.0,
                    metavar="HZ", help="scans per second per robot (default: %(default)s Hz)")
     b.add_argument("--start", type=float_range(0.0, 2.0 ** 31), default=1.0, metavar="S",
@@ -46,9 +47,13 @@ def register(sub) -> None:
 def run_rosbag(args) -> int:
     t0 = time.perf_counter()
     fmt = args.fmt or ("ros1" if args.out and str(args.out).endswith(".bag") else "ros2")
+    if fmt == "ros1" and args.storage is not None:
+        raise InputError(f"--storage {args.storage} is for ROS 2 bags, and this one is ROS 1 "
+                         f"({'--format ros1' if args.fmt else 'the output ends in .bag'}); drop "
+                         f"--storage, or give a ROS 2 bag's directory name")
     progress = Progress("export")
     try:
-        res = export_rosbag(args.run_dir, args.out, fmt=fmt, storage=args.storage,
+        res = export_rosbag(args.run_dir, args.out, fmt=fmt, storage=args.storage or "sqlite3",
                             rate=args.rate, start_s=args.start, progress=progress)
     finally:
         progress.close()
