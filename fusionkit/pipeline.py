@@ -284,12 +284,29 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[OccupancyGrid]
     """Load maps (ROS map_server YAML) and, where ``NAME.scans.npz`` stands beside, their scans."""
     from .mapio import load_map
 
+    _once(paths)
     grids, scans = [], []
     for p in paths:
         grids.append(load_map(p))
         sp = scans_path_for(p)
         scans.append(load_scans(sp) if sp.is_file() else None)
     return grids, scans
+
+
+def _once(paths) -> None:
+    """Refuse a map file given twice (by one path or two: a link, ``a/../a``): a map merged
+    with itself is placed on itself, and the report would list one input twice."""
+    seen: dict = {}
+    for k, p in enumerate(paths):
+        try:
+            st = os.stat(p)
+        except OSError:
+            continue  # the loader says what is wrong with it
+        first = seen.setdefault((st.st_dev, st.st_ino), k)
+        if first != k:
+            same = "" if os.fspath(paths[first]) == os.fspath(p) else f" (as {paths[first]})"
+            raise InputError(f"{p}: the same map file is given twice{same}, as maps {first + 1} "
+                             f"and {k + 1}; give each map once")
 
 
 def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid]:

@@ -8,6 +8,7 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from fusionkit.cli import COMMANDS, build_parser, main
@@ -138,3 +139,24 @@ def test_an_error_is_named_by_the_command_that_met_it_as_its_usage_errors_are(tm
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"{command}: error: ") and err.count("\n") == 1, err
+
+
+def test_a_map_given_twice_is_refused_in_one_line(tmp_path, capsys):
+    """The same file under one path or two (``a/../a``, a link) is one map: merged with itself it
+    would be placed on itself and listed twice in the report."""
+    from fusionkit.grid import OccupancyGrid
+    from fusionkit.mapio import save_map
+
+    data = np.full((40, 40), 0, np.int8)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    save_map(OccupancyGrid(data, 0.1, (0.0, 0.0, 0.0)), tmp_path / "a.yaml")
+    save_map(OccupancyGrid(data, 0.1, (0.0, 0.0, 0.0)), tmp_path / "b.yaml")
+    (tmp_path / "link.yaml").symlink_to(tmp_path / "a.yaml")
+    for second in (tmp_path / "a.yaml", tmp_path / "sub" / ".." / "a.yaml", tmp_path / "link.yaml"):
+        (tmp_path / "sub").mkdir(exist_ok=True)
+        argv = ["merge", str(tmp_path / "a.yaml"), str(tmp_path / "b.yaml"), str(second),
+                "-o", str(tmp_path / "m.yaml")]
+        assert main(argv) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and "given twice" in err[0] and "maps 1 and 3" in err[0], err
+        assert not (tmp_path / "m.yaml").exists()
