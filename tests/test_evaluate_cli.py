@@ -374,3 +374,20 @@ def test_long_map_paths_are_cut_with_an_ellipsis(scene, capsys):
     assert code == 0, err
     row = next(line for line in out.splitlines() if "robot_2.yaml" in line)
     assert row.split()[0].startswith("…") and row.split()[0].endswith("runs/robot_2.yaml")
+
+
+def test_a_robots_own_map_is_scored_in_its_own_frame(scene, capsys):
+    """``evaluate robot_2.yaml`` (no report) places robot_2's map by robot_2's transform, not the
+    first robot's: a perfect map of robot_2 scores 100 %."""
+    root, world, _ = scene
+    save_map(in_robot_frame(world, T2), root / "robot_2.yaml")
+    assert main(["evaluate", str(root / "robot_2.yaml"), "--truth", str(root / "truth.json"),
+                 "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["reference"] == "robot_2"
+    assert out["metrics"]["precision"] == pytest.approx(100.0)
+    # a frame given is still the frame used
+    assert main(["evaluate", str(root / "robot_2.yaml"), "--truth", str(root / "truth.json"),
+                 "--reference", "robot_1", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["reference"] == "robot_1" and out["metrics"]["precision"] < 50.0

@@ -52,7 +52,8 @@ def register(sub) -> None:
                         "printed, and a group's map needs --reference)")
     p.add_argument("--reference", metavar="NAME",
                    help="robot name in truth.json whose map frame the merged map is in, used "
-                        "when there is no report (default: the first robot in truth.json); "
+                        "when there is no report (default: the robot whose map MERGED.yaml is, "
+                        "else the first robot in truth.json); "
                         "with a report it must agree with the report's reference (for a "
                         "group's map, the group's first map)")
     p.add_argument("--json", action="store_true",
@@ -331,7 +332,12 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
                              f"report beside it lists it under 'group_outputs', so its frame is "
                              f"unknown; give the merge report with --report, or the robot whose "
                              f"frame it is in with --reference")
-        ref = reference if reference is not None else next(iter(robots))
+        # a robot's own map is in its own frame; any other map, without a report, in the first
+        # robot's (the frame a merge of the run in order is in)
+        own = next((name for name in robots
+                    if _same_file(merged, truth_info.maps.get(name, truth_info.path.parent / f"{name}.yaml"))),
+                   None)
+        ref = reference if reference is not None else own if own is not None else next(iter(robots))
         if ref not in robots:
             raise InputError(f"--reference {ref}: no such robot in {truth_info.path}; choose one of "
                              f"{', '.join(robots)}")
