@@ -35,11 +35,11 @@ from typing import Iterable, Iterator, Sequence
 from . import _signals
 from ._guards import (_check_target, _parent, _short, _write_error, check_distinct,  # noqa: F401
                       check_not_input, check_out_dir, check_writable, describe_os_error,
-                      make_out_dir, show)
+                      make_out_dir, made_out_dir, show)
 from .errors import InputError
 
 __all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set",
-           "check_not_input", "check_distinct", "check_writable", "check_out_dir", "make_out_dir",
+           "check_not_input", "check_distinct", "check_writable", "check_out_dir", "make_out_dir", "made_out_dir",
            "describe_os_error", "show"]
 
 _TMP, _BAK, _JOURNAL = ".tmp", ".bak", ".journal"

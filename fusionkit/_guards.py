@@ -9,6 +9,7 @@ quoted in a message, never unbounded and never with a raw control character).
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import os
 from pathlib import Path
@@ -17,7 +18,7 @@ from typing import Sequence
 from .errors import InputError
 
 __all__ = ["show", "describe_os_error", "check_not_input", "check_distinct", "check_writable",
-           "check_out_dir", "make_out_dir"]
+           "check_out_dir", "make_out_dir", "made_out_dir"]
 
 
 def show(value, limit: int = 80) -> str:
@@ -123,6 +124,29 @@ def make_out_dir(directory) -> Path:
     except OSError as exc:
         raise _write_error(d, exc) from None
     return d
+
+
+@contextlib.contextmanager
+def made_out_dir(directory):
+    """:func:`make_out_dir` for the writes in the ``with`` block: when they fail or are
+    interrupted, the folders it created are removed again (those left empty), so that a failed
+    command leaves the file system as it found it."""
+    d = Path(directory)
+    missing = []
+    probe = d
+    while not probe.exists() and probe != probe.parent:
+        missing.append(probe)
+        probe = probe.parent
+    make_out_dir(d)
+    try:
+        yield d
+    except BaseException:
+        for folder in missing:  # deepest first
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        raise
 
 
 

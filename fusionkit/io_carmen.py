@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from ._atomic import check_not_input, check_out_dir, make_out_dir, write_set
+from ._atomic import check_not_input, check_out_dir, made_out_dir, write_set
 from .carmen_read import (NO_RETURN_BAND, CarmenConfig, CarmenLog, CarmenStats,  # noqa: F401
                           flaser_geometry, read_carmen)
 from .errors import InputError
@@ -276,8 +276,8 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
         check_outputs(outputs, [path], overwrite=overwrite)
         own, t = to_own_frame(log)
         grid = build_grid(own, mcfg, name=nm)
-        make_out_dir(out_dir)
-        robot = write_robot_files(out_dir, nm, own, grid, t)
+        with made_out_dir(out_dir):
+            robot = write_robot_files(out_dir, nm, own, grid, t)
         if progress:
             progress(1, 1, nm)
         return CarmenImport(carmen.stats, log.range_max, (robot,), None, None, robot.files)
@@ -301,7 +301,6 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
 
     from .mapio import encode_map
 
-    make_out_dir(out_dir)
     robots, files = [], []
     for nm, own, g, t in built:
         robot, payloads = _robot_files(out_dir, nm, own, g, t)
@@ -326,8 +325,9 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
     }
     # One set: images before the YAMLs naming them (YAMLs taken away first), truth.json last.
     files.sort(key=lambda f: f[0].suffix == ".yaml")
-    write_set(files, (truth_path, (json.dumps(truth, indent=2) + "\n").encode("utf-8")),
-              hide_first=[p for p, _ in files if p.suffix == ".yaml"])
+    with made_out_dir(out_dir):
+        write_set(files, (truth_path, (json.dumps(truth, indent=2) + "\n").encode("utf-8")),
+                  hide_first=[p for p, _ in files if p.suffix == ".yaml"])
     if progress:
         progress(total, total, "world")
     files = tuple(p for r in robots for p in r.files) + world.files + (truth_path,)

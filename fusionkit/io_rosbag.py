@@ -37,7 +37,7 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from ._atomic import check_out_dir, make_out_dir
+from ._atomic import check_out_dir, made_out_dir
 from ._inputs import regular_file
 from .errors import InputError
 from .io_carmen import (ImportedMap, check_name, check_outputs, default_name, mapping_config,
@@ -470,8 +470,8 @@ def import_rosbag(path, out_dir, *, scan_topic: str, poses: PoseSource, name: st
         own, t = to_own_frame(log)
     free = own.range_max if no_return_free is None else no_return_free
     grid = build_grid(own, mapping_config(resolution, free), name=nm)
-    make_out_dir(out_dir)
-    robot = write_robot_files(out_dir, nm, own, grid, t)
+    with made_out_dir(out_dir):
+        robot = write_robot_files(out_dir, nm, own, grid, t)
     return BagImport(bag.stats, robot, robot.files)
 
 

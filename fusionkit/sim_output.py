@@ -7,7 +7,7 @@ import json
 import re
 from pathlib import Path
 
-from ._atomic import check_not_input, check_out_dir, make_out_dir, write_set
+from ._atomic import check_not_input, check_out_dir, made_out_dir, write_set
 from .errors import FusionkitError, InputError
 from .mapping import MappingConfig
 
@@ -108,7 +108,6 @@ def write_run(sim, out_dir, *, world_path=None, stale=()) -> Path:
     stale = [p for p in [*previous, *map(Path, stale)]
              if p not in keep and p.is_file() and p.resolve() not in inputs]
 
-    make_out_dir(out)
     payloads = []
     yamls = []
     robots = []
@@ -134,7 +133,8 @@ def write_run(sim, out_dir, *, world_path=None, stale=()) -> Path:
     truth["config"] = cfg
     # Images before the YAMLs that name them (the YAMLs are taken away first), truth.json last.
     order = sorted(payloads, key=lambda f: f[0].suffix in (".yaml", ".yml"))
-    write_set(order + [(p, None) for p in stale],
-              (out / "truth.json", (json.dumps(truth, indent=2) + "\n").encode("utf-8")),
-              hide_first=yamls)
+    with made_out_dir(out):
+        write_set(order + [(p, None) for p in stale],
+                  (out / "truth.json", (json.dumps(truth, indent=2) + "\n").encode("utf-8")),
+                  hide_first=yamls)
     return out / "truth.json"

@@ -401,3 +401,34 @@ def test_an_export_sweeps_the_temporary_folder_a_killed_export_left(tmp_path):
     res = export_rosbag(run, tmp_path / "run_bag")
     assert res.path.is_dir() and not killed.exists() and mine.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == [mine.name, "run", "run_bag"]
+
+
+@pytest.mark.parametrize("command", ["simulate", "import"])
+@pytest.mark.parametrize("fault", [OSError(28, "No space left on device"), KeyboardInterrupt()])
+def test_a_failed_write_takes_back_the_folders_it_made(tmp_path, monkeypatch, capsys, command, fault):
+    """A run written into a folder that did not exist: when its write fails (a full disk) or is
+    interrupted, the folders made for it are removed again, not left empty."""
+    from fusionkit.cli import main
+
+    def failing(*a, **k):
+        raise fault
+
+    monkeypatch.setattr(_atomic, "write_set", failing)
+    import fusionkit.io_carmen as io_carmen
+    import fusionkit.sim_output as sim_output
+    monkeypatch.setattr(sim_output, "write_set", failing)
+    monkeypatch.setattr(io_carmen, "write_set", failing)
+    (tmp_path / "have").mkdir()
+    out = tmp_path / "have" / "new" / "run"
+    if command == "simulate":
+        argv = ["simulate", "--robots", "2", "--poses", "40", "--out", str(out), "--quiet"]
+    else:
+        log = tmp_path / "have" / "tiny.log"
+        lines = [f"FLASER 3 1.0 1.0 1.0 {0.1 * k:.2f} 0.0 0.0 {0.1 * k:.2f} 0.0 0.0 {k}.0 host {k}.0"
+                 for k in range(30)]
+        log.write_text("\n".join(lines) + "\n")
+        argv = ["import", "carmen", str(log), "--out", str(out), "--split", "2"]
+    code = main(argv)
+    assert code == (130 if isinstance(fault, KeyboardInterrupt) else 2), capsys.readouterr().err
+    assert sorted(p.name for p in (tmp_path / "have").iterdir()) == \
+        (["tiny.log"] if command == "import" else [])
