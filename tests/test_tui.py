@@ -499,6 +499,8 @@ async def test_after_a_cancelled_run_export_says_the_result_is_an_earlier_one(in
         await pilot.press("escape")
         await until(pilot, lambda: not screen.merging)
         assert bar.progress >= shown  # the bar stays where the run stopped
+        stages = str(screen.run_panel.query_one("#stages").render())
+        assert "(stopped)" in stages and "▶" not in stages  # no stage is still running
         assert screen.result is first
         await pilot.press("e")
         await pilot.pause()

@@ -86,7 +86,8 @@ class RunPanel(Vertical):
     def plot(self) -> ConvergencePlot:
         return self.query_one(ConvergencePlot)
 
-    def _stages(self, current: str, step: int = 0, total: int = 0, final: str = "") -> Text:
+    def _stages(self, current: str, step: int = 0, total: int = 0, final: str = "",
+                stopped: bool = False) -> Text:
         names = [s for s, _ in STAGES]
         text = Text()
         idx = names.index(current) if current in names else (len(names) if current == "done" else -1)
@@ -97,7 +98,10 @@ class RunPanel(Vertical):
                 text.append(f"✓ {words}", style="green")
             elif k == idx:
                 more = f" {step + 1}/{total}" if name == "align" and total else ""
-                text.append(f"▶ {words}{more}", style="bold")
+                if stopped:  # where the merge was when it was cancelled or failed
+                    text.append(f"■ {words}{more} (stopped)", style="bold yellow")
+                else:
+                    text.append(f"▶ {words}{more}", style="bold")
             else:
                 text.append(f"· {words}", style="dim")
         if final:
@@ -191,6 +195,7 @@ class RunPanel(Vertical):
 
     def stopped(self, why: str) -> None:
         """The merge was cancelled or failed: say so, keep the plot as it was."""
-        self.query_one("#stages", Static).update(self._stages(self._stage or "", *self._where))
+        self.query_one("#stages", Static).update(self._stages(self._stage or "scans", *self._where,
+                                                              stopped=True))
         self.query_one("#detail", Static).update(Text(why, style="bold"))
         self.query_one("#left", Static).update("press r to run again")
