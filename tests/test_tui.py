@@ -264,6 +264,13 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root):
         assert (in_root / "run" / "robot_1.pgm").read_bytes() == before
         assert any(n.severity == "error" and "overwrite the input" in n.message
                    for n in app._notifications)
+        # a failed export opens the dialog again with the path, so the next keys edit it
+        assert isinstance(app.screen, ExportScreen)
+        assert app.screen.query_one(Input).value == "run/robot_1.yaml"
+        assert "Export failed" in str(app.screen.query_one("#export-note").render())
+        await pilot.press("escape")
+        await pilot.pause()
+        assert not isinstance(app.screen, ExportScreen)
 
     # the exported map is what `fusionkit evaluate` reads
     assert main(["evaluate", str(out), "--truth", str(in_root / "run" / "truth.json"), "--json"]) == 0

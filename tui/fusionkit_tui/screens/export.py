@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from textual import on
@@ -105,6 +106,9 @@ class ExportScreen(ModalScreen[str | None]):
                      f"{where}; enter saves, escape cancels")
         if not where.is_dir():
             error.update(f"the directory {where} does not exist; create it or choose another")
+            return False
+        if not os.access(where, os.W_OK | os.X_OK):
+            error.update(f"the directory {where} is not writable; choose another")
             return False
         try:
             check_not_input(p.all, self._inputs)

@@ -359,7 +359,13 @@ class MainScreen(Screen):
         try:
             paths = export_result(self.result, [str(p) for p in self.inputs], path)
         except (FusionkitError, OSError) as exc:
-            self.notify(describe_error(exc), title="Export failed", severity="error", timeout=10)
+            why = describe_error(exc)
+            self.notify(why, title="Export failed", severity="error", timeout=10)
+            # the dialog again, with the path typed, so that a key pressed next edits it rather
+            # than being taken as a command of the main screen
+            self.app.push_screen(ExportScreen(path, protected_files(self.inputs),
+                                              note=f"Export failed: {why}. Change the path, or "
+                                                   f"escape."), self._export_to)
             return None
         self.exported = paths
         self.notify(f"map {paths.yaml} (+ {paths.image.name}), report {paths.report}",
