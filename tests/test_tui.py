@@ -600,3 +600,71 @@ async def test_a_map_removed_from_the_selection_is_no_longer_previewed(in_root):
         await until(pilot, lambda: preview.grid is None)
         assert maps.previewing_label() == ""
         assert "robot_" not in str(maps.query_one("#info").render())
+
+
+_STUCK_MERGE = """
+import pathlib, threading, sys
+import fusionkit_tui.runner as runner
+import fusionkit_tui.screens.main as main_screen
+
+def stuck(*a, **k):  # a merge busy in a kernel for a long time: it never reaches a callback
+    pathlib.Path("merging.flag").write_text("yes")
+    threading.Event().wait()
+
+runner.run_merge = stuck
+main_screen.run_merge = stuck
+from fusionkit.cli import main
+sys.exit(main(["tui", "run"]))
+"""
+
+
+def test_ctrl_c_ends_the_process_while_a_merge_is_busy(in_root):
+    """Textual waits for a thread worker before the process may end; a merge that is busy in a
+    kernel for minutes (a large map's preparation) does not look at its cancel flag. Ctrl-C
+    ends the process anyway: terminal restored, one line, exit status 130."""
+    import pty
+    import select
+    import subprocess
+    import sys
+
+    flag = in_root / "merging.flag"
+    flag.unlink(missing_ok=True)
+    leader, follower = pty.openpty()
+    env = {**os.environ, "TERM": "xterm-256color", "COLUMNS": "100", "LINES": "32"}
+    proc = subprocess.Popen([sys.executable, "-c", _STUCK_MERGE], stdin=follower, stdout=follower,
+                            stderr=follower, env=env, cwd=in_root, start_new_session=True)
+    os.close(follower)
+    seen = b""
+
+    def read_for(seconds: float, until=lambda: False) -> None:
+        nonlocal seen
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < seconds and not until():
+            r, _, _ = select.select([leader], [], [], 0.1)
+            if r:
+                try:
+                    seen += os.read(leader, 65536)
+                except OSError:  # the process is gone and its terminal with it
+                    return
+
+    try:
+        read_for(60, lambda: b"Result" in seen)       # the UI is up
+        read_for(2)
+        os.write(leader, b"r")                         # run: the merge starts and is stuck
+        read_for(60, flag.exists)
+        assert flag.exists(), seen[-2000:]
+        read_for(1)
+        os.write(leader, b"\x03")                     # Ctrl-C
+        read_for(60, lambda: proc.poll() is not None)
+        read_for(0.5)
+        code = proc.poll()
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, 9)
+            proc.wait()
+        os.close(leader)
+        flag.unlink(missing_ok=True)
+    assert code == 130
+    tail = seen.decode(errors="replace").replace("\r", "").strip().splitlines()[-1]
+    assert tail.endswith("fusionkit tui: interrupted; no output was left half-written"), tail
+    assert b"\x1b[?1049l" in seen                     # the terminal left the UI's screen

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import os
 import sys
+import threading
+import time
 
 from ..errors import InputError
 
@@ -30,7 +33,29 @@ def run(args) -> int:
         raise InputError(f"the terminal UI cannot start ({exc}); reinstall fusionkit with its "
                          f"dependencies (textual, textual-plotext)") from None
     app = make_app(args.paths)
+    said = threading.Lock()  # the line of an interrupt is said once, by whoever gets there first
+
+    def say_interrupted() -> None:
+        if said.acquire(blocking=False):
+            print(INTERRUPTED, file=sys.stderr, flush=True)
+
+    def leave_when_closed() -> None:
+        # Ctrl-C while a merge is busy in a kernel: Textual restores the terminal, then waits
+        # for the worker thread, which looks at its cancel flag only between steps (minutes on
+        # a large map). The merge writes no file (an export runs in the UI thread), so once
+        # the UI is closed the process ends here, without waiting.
+        deadline = time.monotonic() + 10.0
+        while getattr(app, "_loop", None) is not None and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)  # the worker may yet stop by itself, and the command end as usual
+        say_interrupted()
+        os._exit(130)
+
+    app.on_interrupt = lambda: threading.Thread(target=leave_when_closed, daemon=True).start()
     app.run()
     if app.return_code == 130:  # Ctrl-C: one line, as every command says it
-        print("fusionkit tui: interrupted; no output was left half-written", file=sys.stderr)
+        say_interrupted()
     return int(app.return_code or 0)
+
+
+INTERRUPTED = "fusionkit tui: interrupted; no output was left half-written"

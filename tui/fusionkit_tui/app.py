@@ -6,7 +6,7 @@ Start it with ``fusionkit tui [DIR or MAP.yaml ...]`` or build it with :func:`ma
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Callable, Sequence
 
 from textual.app import App
 from textual.binding import Binding
@@ -40,10 +40,15 @@ class FusionkitApp(App):
         super().__init__()
         self._root = Path(root)
         self._selected = [Path(p) for p in selected]
+        #: Called (no arguments) after Ctrl-C asked the app to exit while a worker still runs;
+        #: ``fusionkit tui`` uses it to end the process without waiting for that worker.
+        self.on_interrupt: Callable[[], None] | None = None
 
     def action_interrupt(self) -> None:
         """Quit at once, a running merge with it, with the exit status of an interrupt."""
         self.exit(return_code=130)
+        if self.on_interrupt is not None and any(w.is_running for w in self.workers):
+            self.on_interrupt()
 
     def get_default_screen(self) -> MainScreen:
         return MainScreen(self._root, self._selected)
