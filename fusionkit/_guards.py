@@ -160,11 +160,11 @@ def _same_file(a: Path, b: Path) -> bool:
         return False
 
 
-def check_not_input(outputs, inputs) -> None:
+def check_not_input(outputs, inputs, *, what: str = "the input") -> None:
     """Raise :class:`InputError` when any output path is one of the input files.
 
     fusionkit never overwrites an input; paths are compared after resolving links (hard links
-    too).
+    too). ``what`` names the files of ``inputs`` in the message.
     """
     resolved = {}
     for p in inputs:
@@ -179,7 +179,7 @@ def check_not_input(outputs, inputs) -> None:
             hit = next((s for q, s in resolved.items() if _same_file(q, r)), None)
         if hit is not None:
             raise InputError(
-                f"{_short(out)}: this output would overwrite the input {_short(hit)}; "
+                f"{_short(out)}: this output would overwrite {what} {_short(hit)}; "
                 f"choose another output path")
 
 

@@ -160,3 +160,20 @@ def test_a_map_given_twice_is_refused_in_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.splitlines()
         assert len(err) == 1 and "given twice" in err[0] and "maps 1 and 3" in err[0], err
         assert not (tmp_path / "m.yaml").exists()
+
+
+def test_a_merge_never_writes_over_the_ground_truth_of_the_inputs_run(tmp_path, capsys):
+    """Merging two robots of a run into the run's folder may not replace its world map, another
+    robot's map or truth.json: ``fusionkit evaluate`` reads them afterwards."""
+    run = tmp_path / "run"
+    assert main(["simulate", "--robots", "3", "--poses", "40", "--out", str(run), "--quiet"]) == 0
+    before = {p.name: p.read_bytes() for p in run.iterdir()}
+    for target in ("world.yaml", "robot_3.yaml"):
+        assert main(["merge", str(run / "robot_1.yaml"), str(run / "robot_2.yaml"), "-o",
+                     str(run / target)]) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and "ground truth of the inputs' run" in err[0], err
+    assert main(["merge", str(run / "robot_1.yaml"), str(run / "robot_2.yaml"), "-o",
+                 str(tmp_path / "m.yaml"), "--report", str(run / "truth.json")]) == 2
+    assert "ground truth" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in run.iterdir()} == before

@@ -64,6 +64,8 @@ def run(args) -> int:
     check_writable([out, image_path, report_path])
     check_distinct([("-o", out), ("the output's image", image_path), ("--report", report_path)])
     check_not_input([out, image_path, report_path], protected_inputs(inputs))
+    check_not_input([out, image_path, report_path], run_truth(inputs),
+                    what="a file of the ground truth of the inputs' run,")
     reference = 0
     if args.reference is not None:
         if args.reference not in inputs:
@@ -100,6 +102,8 @@ def run(args) -> int:
     group_paths = group_output_paths(out, len(result.groups))
     check_not_input(group_paths + [q.with_suffix(".pgm") for q in group_paths],
                     protected_inputs(inputs))
+    check_not_input(group_paths + [q.with_suffix(".pgm") for q in group_paths], run_truth(inputs),
+                    what="a file of the ground truth of the inputs' run,")
     report = result.report(inputs, output=str(args.output))
     # One set: merged map, each group's map and the report (the commit point); group maps of an
     # earlier merge into the same output that this one does not write are removed with it.
@@ -121,6 +125,28 @@ def protected_inputs(inputs) -> list[Path]:
     from ..mapio import _protected
 
     return _protected(inputs) + [Path(m).with_name(Path(m).stem + ".scans.npz") for m in inputs]
+
+
+def run_truth(inputs) -> list[Path]:
+    """The ground truth of each run an input map stands in (a ``truth.json`` beside it): that
+    file, the world map it names and the run's robot maps, with their images. A merge written
+    over one of them would spoil the run's evaluation (``fusionkit evaluate``)."""
+    from ..errors import FusionkitError
+    from ..mapio import _protected
+    from .evaluate import read_truth
+
+    out: list[Path] = []
+    for folder in dict.fromkeys(Path(m).parent for m in inputs):
+        truth = folder / "truth.json"
+        if not truth.is_file():
+            continue
+        out.append(truth)
+        try:
+            t = read_truth(truth)
+        except (FusionkitError, OSError):
+            continue  # not a run's truth after all: only the file itself is kept
+        out += _protected([t.world, *t.maps.values()])
+    return out
 
 
 def format_placements(result, names) -> str:
