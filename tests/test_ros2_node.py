@@ -271,13 +271,56 @@ def test_known_init_poses_from_a_map_merge_params_file(procs, run3, tmp_path):
     (["merge-node", "--ros-args", "-p", "merging_rate:=fast"], "parameter merging_rate: expected a number"),
     (["merge-node", "--ros-args", "-p", "method:=magic"], "parameter method: 'magic' is not a method"),
     (["merge-node", "--params-file", "missing.yaml"], "missing.yaml: parameter file not found"),
-    (["merge-node", "--params-file", "broken.yaml"], "Couldn't parse params file"),
+    (["merge-node", "--params-file", "broken.yaml"], "broken.yaml: not valid YAML at line 4"),
+    (["merge-node", "--ros-args", "--params-file", "broken.yaml"], "broken.yaml: not valid YAML"),
+    (["merge-node", "--params-file", "text.yaml"], "this one holds a text"),
+    (["merge-node", "--params-file", "alias.yaml"], "uses YAML aliases"),
+    (["merge-node", "--params-file", "."], ".: is a folder, not a parameter file"),
     (["merge-node", "--ros-args", "-p"], "ROS arguments '--ros-args -p' not understood"),
     (["play", "nowhere"], "nowhere: not a directory"),
 ])
 def test_bad_input_is_one_line_and_exit_2(procs, argv, message):
     (procs.tmp / "broken.yaml").write_text("map_merge:\n  ros__parameters:\n    merging_rate: [1,\n")
+    (procs.tmp / "text.yaml").write_text("just a string\n")  # read by rcl as no parameters at all
+    (procs.tmp / "alias.yaml").write_text("a: &x 1\nmap_merge:\n  ros__parameters:\n"
+                                          "    merging_rate: *x\n")
     p = procs.start("cmd", FUSIONKIT + ["ros2", *argv])
     assert p.wait(60) == 2
     out = procs.log("cmd").strip().splitlines()
     assert len(out) == 1 and message in out[0], out
+    assert " at /" not in out[0]  # no C source place of rcl's
+
+
+@pytest.mark.parametrize("argv", [["merge-node"], ["play", "RUN", "--duration", "20"]])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_stopped_while_it_starts_a_ros2_command_ends_with_exit_0(procs, run3, argv, sig):
+    """The ROS 2 commands run until stopped and write nothing: a signal that comes while they
+    start up (importing ROS, building a run's map steps) ends them as one that comes later."""
+    argv = [str(run3) if a == "RUN" else a for a in argv]
+    p = procs.start("cmd", FUSIONKIT + ["ros2", *argv])
+    time.sleep(0.5)
+    assert p.poll() is None
+    p.send_signal(sig)
+    assert p.wait(60) == 0, procs.log("cmd")
+    assert "Traceback" not in procs.log("cmd")
+
+
+def test_the_status_is_published_while_the_reference_robot_is_missing(procs, run3, tmp_path):
+    """With ``reference_robot`` naming a robot that never comes, nothing can be placed; the
+    status still says which robots are there and that none is placed."""
+    probe_out = tmp_path / "probe.jsonl"
+    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
+                          "robot_1", "robot_2", "robot_3"])
+    procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
+                                      "-p", "reference_robot:=/nobody"])
+    procs.start("play", FUSIONKIT + ["ros2", "play", str(run3), "--duration", "10", "--steps", "2"])
+
+    def waiting():
+        sts = [s["status"] for s in _records(probe_out, "status")]
+        return next((s for s in sts if len(s["robots"]) == 3), None)
+
+    status = _wait(waiting, 90, procs, "a status naming the three robots")
+    assert status["reference"] == "/nobody"
+    assert not any(r["placed"] for r in status["robots"].values())
+    assert "waiting for the reference robot /nobody's map" in procs.log("node")
+    assert procs.stop("play") == 0 and procs.stop("node") == 0

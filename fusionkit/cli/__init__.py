@@ -102,6 +102,10 @@ def main(argv=None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM as _signals.Terminated
         _quiet_signals()
+        if _command_of(sys.argv[1:] if argv is None else list(argv)) == "ros2":
+            # the ROS 2 commands run until stopped and write nothing: stopped while they start
+            # up, they end as they do once running, with exit 0
+            return 0
         term = isinstance(exc, _signals.Terminated)
         _say(f"{command}: {'terminated' if term else 'interrupted'}; no output was left "
              f"half-written")

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import contextlib
 import os
+import re
 from pathlib import Path
 
 from .. import InputError
 
-__all__ = ["require_rclpy", "ros_context", "ros_argv"]
+__all__ = ["require_rclpy", "ros_context", "ros_argv", "check_params_file"]
 
 
 def require_rclpy():
@@ -25,15 +26,49 @@ def require_rclpy():
     return rclpy
 
 
+#: The largest parameter file read (a parameter file is a few lines of YAML)
+MAX_PARAMS_BYTES = 16 * 2**20
+
+
+def check_params_file(path) -> None:
+    """Refuse, in one line that says what to fix, a parameter file rcl would refuse in its own
+    words (a C source path, the whole ``--ros-args``) or would read as no parameters at all:
+    missing, a folder, not YAML, YAML aliases (rcl does not read them), not a mapping."""
+    import yaml
+
+    from .._inputs import read_bytes
+
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a parameter file; give a ROS 2 parameter "
+                         f"YAML (NODE_NAME: ros__parameters: ...)")
+    if not path.is_file():
+        raise InputError(f"{path}: parameter file not found; give a ROS 2 parameter YAML "
+                         f"(NODE_NAME: ros__parameters: ...)")
+    text = read_bytes(path, "parameter file", MAX_PARAMS_BYTES)
+    try:
+        if any(isinstance(ev, yaml.AliasEvent) for ev in yaml.parse(text, Loader=yaml.SafeLoader)):
+            raise InputError(f"{path}: uses YAML aliases (*name), which ROS 2 does not read; "
+                             f"write the values out")
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark is not None else ""
+        what = getattr(exc, "problem", None) or type(exc).__name__
+        raise InputError(f"{path}: not valid YAML{where} ({what}); fix the parameter file") from None
+    if not isinstance(doc, dict):
+        held = ("nothing" if doc is None else "a list" if isinstance(doc, list) else
+                "a text" if isinstance(doc, str) else "a value")
+        raise InputError(f"{path}: a parameter file maps node names to 'ros__parameters:' "
+                         f"(map_merge: ros__parameters: ...); this one holds {held}")
+
+
 def ros_argv(prog: str, ros_args=(), params_files=()) -> list[str]:
     """The argument list for ``rclpy.init``: ``--ros-args`` then every parameter file."""
     argv = [prog, "--ros-args", *ros_args]
     for f in params_files:
-        path = Path(f)
-        if not path.is_file():
-            raise InputError(f"{path}: parameter file not found; give a ROS 2 parameter YAML "
-                             f"(NODE_NAME: ros__parameters: ...)")
-        argv += ["--params-file", os.fspath(path)]
+        check_params_file(f)
+        argv += ["--params-file", os.fspath(f)]
     return argv
 
 
@@ -70,15 +105,17 @@ def ros_context(argv):
     from rclpy.executors import ExternalShutdownException
 
     for i, a in enumerate(argv):
-        if a == "--params-file" and (i + 1 >= len(argv) or not Path(argv[i + 1]).is_file()):
-            raise InputError(f"--params-file {argv[i + 1] if i + 1 < len(argv) else ''}: "
-                             f"parameter file not found")
+        if a == "--params-file":
+            if i + 1 >= len(argv):
+                raise InputError("--params-file: give the parameter file after it")
+            check_params_file(argv[i + 1])
     try:
         with _stderr_held():
             rclpy.init(args=list(argv))
     except Exception as exc:  # noqa: BLE001 - rcl reports bad arguments as RCLError
-        raise InputError(f"ROS arguments {' '.join(argv[1:])!r} not understood: "
-                         f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}") from None
+        why = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        why = re.sub(r",? at /\S+:\d+", "", why)  # rcl's C source places say nothing to the user
+        raise InputError(f"ROS arguments {' '.join(argv[1:])!r} not understood: {why}") from None
     try:
         yield rclpy
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -302,6 +302,9 @@ class MergeNode:
             if version == done or ref not in dict(snapshot) or len(snapshot) < 2:
                 if ref is not None and snapshot and ref not in dict(snapshot):
                     self._once(("noref", ref), f"waiting for the reference robot {ref}'s map", "info")
+                if version != done:  # say what is known (the robots, none placed yet) meanwhile
+                    self._publish_status()
+                    done = version
                 continue
             t0 = time.perf_counter()
             try:
