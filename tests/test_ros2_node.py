@@ -324,3 +324,15 @@ def test_the_status_is_published_while_the_reference_robot_is_missing(procs, run
     assert not any(r["placed"] for r in status["robots"].values())
     assert "waiting for the reference robot /nobody's map" in procs.log("node")
     assert procs.stop("play") == 0 and procs.stop("node") == 0
+
+
+def test_a_parameter_the_node_does_not_know_is_said_once_and_ignored(procs):
+    """As map_merge, the node ignores a parameter it does not know; a typo (merging_rte) is
+    said in one WARN line. ROS's own parameters (use_sim_time) are not warned about."""
+    procs.start("node", MERGE_NODE + ["--ros-args", "-p", "merging_rte:=2.0",
+                                      "-p", "use_sim_time:=false"])
+    _wait(lambda: "map merging started" in procs.log("node"), 60, procs, "the node to start")
+    assert procs.stop("node") == 0
+    log = procs.log("node")
+    assert log.count("parameter merging_rte is not one of this node's; ignored") == 1
+    assert "use_sim_time" not in log

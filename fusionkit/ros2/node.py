@@ -24,7 +24,7 @@ import time
 from .. import FusionkitError, MergeCancelled
 from ._convert import BadMap, fill_msg, fill_pose, grid_from_msg
 from ._names import is_robot_map_topic, parent_namespace, robot_slug
-from ._params import PARAMETERS, NodeSettings, settings_from
+from ._params import INIT_POSE, PARAMETERS, NodeSettings, settings_from
 from ._robots import Robot, estimate_round
 from ._tracker import Tracker
 
@@ -46,7 +46,18 @@ def read_settings(node) -> NodeSettings:
         if not node.has_parameter(name):
             node.declare_parameter(name, default)
     values = {name: p.value for name, p in node.get_parameters_by_prefix("").items()}
-    return settings_from(values)
+    settings = settings_from(values)
+    # as map_merge, a parameter it does not know is ignored; unlike it, a typo is said
+    for name in sorted(values):
+        if name not in PARAMETERS and not INIT_POSE.match(name) and name not in ROS_OWN \
+                and not name.startswith("qos_overrides."):
+            node.get_logger().warn(f"parameter {name} is not one of this node's; ignored (the "
+                                   f"parameters: fusionkit ros2 merge-node --help)")
+    return settings
+
+
+#: Parameters every ROS 2 node has
+ROS_OWN = frozenset({"use_sim_time", "start_type_description_service", "start_parameter_services"})
 
 
 class MergeNode:
