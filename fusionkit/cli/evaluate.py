@@ -185,6 +185,11 @@ def find_report(merged, report=None) -> Path | None:
     return None
 
 
+def _map_of(truth: Truth, name: str) -> Path:
+    """Robot ``name``'s map file: its ``map`` in truth.json, else ``NAME.yaml`` beside it."""
+    return truth.maps.get(name, truth.path.parent / f"{name}.yaml")
+
+
 def _same_file(a: Path, b: Path) -> bool:
     try:
         return a.exists() and b.exists() and a.samefile(b)
@@ -215,8 +220,7 @@ def robot_of(truth: Truth, path_text: str, *, bases=(), others=()) -> str:
     robots = ", ".join(truth.robots)
     if found is not None:
         for name in truth.robots:
-            mine = truth.maps.get(name, truth.path.parent / f"{name}.yaml")
-            if _same_file(found, mine):
+            if _same_file(found, _map_of(truth, name)):
                 return name
         raise InputError(f"map {path_text} ({found.resolve()}) is not in the run of {truth.path}: its "
                          f"robots ({robots}) are the robot maps beside it; give the truth.json of "
@@ -334,9 +338,7 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
                              f"frame it is in with --reference")
         # a robot's own map is in its own frame; any other map, without a report, in the first
         # robot's (the frame a merge of the run in order is in)
-        own = next((name for name in robots
-                    if _same_file(merged, truth_info.maps.get(name, truth_info.path.parent / f"{name}.yaml"))),
-                   None)
+        own = next((name for name in robots if _same_file(merged, _map_of(truth_info, name))), None)
         ref = reference if reference is not None else own if own is not None else next(iter(robots))
         if ref not in robots:
             raise InputError(f"--reference {ref}: no such robot in {truth_info.path}; choose one of "

@@ -63,9 +63,9 @@ def run(args) -> int:
     inputs = list(args.maps)
     check_writable([out, image_path, report_path])
     check_distinct([("-o", out), ("the output's image", image_path), ("--report", report_path)])
-    check_not_input([out, image_path, report_path], protected_inputs(inputs))
-    check_not_input([out, image_path, report_path], run_truth(inputs),
-                    what="a file of the ground truth of the inputs' run,")
+    protected, truth_files = protected_inputs(inputs), run_truth(inputs)
+    check_not_input([out, image_path, report_path], protected)
+    check_not_input([out, image_path, report_path], truth_files, what=TRUTH_FILE)
     reference = 0
     if args.reference is not None:
         if args.reference not in inputs:
@@ -100,10 +100,9 @@ def run(args) -> int:
         pairs_bar.close()
         progress.close()
     group_paths = group_output_paths(out, len(result.groups))
-    check_not_input(group_paths + [q.with_suffix(".pgm") for q in group_paths],
-                    protected_inputs(inputs))
-    check_not_input(group_paths + [q.with_suffix(".pgm") for q in group_paths], run_truth(inputs),
-                    what="a file of the ground truth of the inputs' run,")
+    group_files = group_paths + [q.with_suffix(".pgm") for q in group_paths]
+    check_not_input(group_files, protected)
+    check_not_input(group_files, truth_files, what=TRUTH_FILE)
     report = result.report(inputs, output=str(args.output))
     # One set: merged map, each group's map and the report (the commit point); group maps of an
     # earlier merge into the same output that this one does not write are removed with it.
@@ -127,13 +126,17 @@ def protected_inputs(inputs) -> list[Path]:
     return _protected(inputs) + [Path(m).with_name(Path(m).stem + ".scans.npz") for m in inputs]
 
 
+#: How :func:`check_not_input` names a file of :func:`run_truth`
+TRUTH_FILE = "a file of the ground truth of the inputs' run,"
+
+
 def run_truth(inputs) -> list[Path]:
     """The ground truth of each run an input map stands in (a ``truth.json`` beside it): that
     file, the world map it names and the run's robot maps, with their images. A merge written
     over one of them would spoil the run's evaluation (``fusionkit evaluate``)."""
     from ..errors import FusionkitError
     from ..mapio import _protected
-    from .evaluate import read_truth
+    from .evaluate import _map_of, read_truth
 
     out: list[Path] = []
     for folder in dict.fromkeys(Path(m).parent for m in inputs):
@@ -145,7 +148,7 @@ def run_truth(inputs) -> list[Path]:
             t = read_truth(truth)
         except (FusionkitError, OSError):
             continue  # not a run's truth after all: only the file itself is kept
-        out += _protected([t.world, *t.maps.values()])
+        out += _protected([t.world, *(_map_of(t, name) for name in t.robots)])
     return out
 
 

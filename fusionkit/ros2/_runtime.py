@@ -64,10 +64,10 @@ def check_params_file(path) -> None:
 
 
 def ros_argv(prog: str, ros_args=(), params_files=()) -> list[str]:
-    """The argument list for ``rclpy.init``: ``--ros-args`` then every parameter file."""
+    """The argument list for ``rclpy.init``: ``--ros-args`` then every parameter file (each
+    checked by :func:`ros_context`, as one given inside ``ros_args`` is)."""
     argv = [prog, "--ros-args", *ros_args]
     for f in params_files:
-        check_params_file(f)
         argv += ["--params-file", os.fspath(f)]
     return argv
 
