@@ -98,6 +98,34 @@ def test_an_unknown_option_is_named_by_the_command_it_was_given_to(capsys, argv,
                                 f"see {command} --help"]
 
 
+@pytest.mark.parametrize("argv, line", [
+    (["merge", "a.yaml", "b.yaml", "--ouput", "m.yaml"],
+     "fusionkit merge: error: unrecognized arguments: --ouput (did you mean --output?); "
+     "see fusionkit merge --help"),
+    (["merge", "a.yaml", "b.yaml", "-o", "m.yaml", "--sed", "3"],
+     "fusionkit merge: error: unrecognized arguments: --sed 3 (did you mean --seed?); "
+     "see fusionkit merge --help"),
+    (["import", "carmen", "x.log", "--ot", "d"],
+     "fusionkit import carmen: error: unrecognized arguments: --ot (did you mean --out?); "
+     "see fusionkit import carmen --help"),
+    (["ros2", "--bogus"], "fusionkit ros2: error: unrecognized arguments: --bogus; "
+                          "see fusionkit ros2 --help"),
+])
+def test_a_mistyped_option_is_named_with_the_option_it_may_mean(capsys, argv, line):
+    """A typo in a required option's name used to be reported as that option missing
+    ("the following arguments are required: -o/--output"), the word typed never named."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert capsys.readouterr().err.splitlines() == [line]
+
+
+def test_negative_numbers_and_abbreviations_are_not_taken_for_unknown_options(capsys):
+    with pytest.raises(SystemExit):
+        main(["merge", "a.yaml", "--theta", "-0.5", "--max-false", "0.1"])
+    assert "the following arguments are required: -o/--output" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("argv, words", [
     (["merge", "a.yaml", "b.yaml", "-o", "m.yaml", "--workers", "0"], "--workers: must be between 1"),
     (["merge", "a.yaml", "b.yaml", "-o", "m.yaml", "--seed", "-1"], "--seed: must be between 0"),

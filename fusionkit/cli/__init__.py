@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 
 from .. import _signals
@@ -50,9 +51,49 @@ class _Parser(argparse.ArgumentParser):
     """An argument parser whose usage errors are one line, ending with where the options are
     explained (its subcommands' parsers are of this class too)."""
 
+    def parse_known_args(self, args=None, namespace=None):
+        # the words this (sub)command was given, to name a mistyped option in an error
+        self._given = list(sys.argv[1:] if args is None else args)
+        return super().parse_known_args(args, namespace)
+
     def error(self, message: str):
+        unknown = self._unknown_options()
+        if unknown and message.startswith("the following arguments are required"):
+            # a mistyped option (--ouput) leaves the one it meant missing: name the typo
+            message = f"unrecognized arguments: {' '.join(unknown)}"
+        if message.startswith("unrecognized arguments:"):
+            message += self._did_you_mean(unknown)
         _say(f"{self.prog}: error: {_one_line(message)}; see {self.prog} --help")
         raise SystemExit(2)
+
+    def _unknown_options(self) -> list[str]:
+        """The words given to this parser that look like options it does not have (before
+        any ``--``; negative numbers and abbreviations argparse accepts are not counted)."""
+        known = set(self._option_string_actions)
+        unknown = []
+        for word in getattr(self, "_given", []):
+            if word == "--":
+                break
+            name = word.split("=", 1)[0]
+            if (not word.startswith("-") or word == "-" or name in known or name[:2] in known
+                    or _NUMBER.fullmatch(word)
+                    or (name.startswith("--") and self.allow_abbrev
+                        and any(k.startswith(name) for k in known))):
+                continue
+            unknown.append(name)
+        return unknown
+
+    def _did_you_mean(self, unknown: list[str]) -> str:
+        import difflib
+
+        options = sorted(k for k in self._option_string_actions if k.startswith("--"))
+        hints = [m[0] for name in unknown
+                 if (m := difflib.get_close_matches(name, options, n=1, cutoff=0.7))]
+        return f" (did you mean {' or '.join(hints)}?)" if hints else ""
+
+
+#: a negative number given as an option's value (``--seed -1``)
+_NUMBER = re.compile(r"-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 
 
 def build_parser(argv=None) -> argparse.ArgumentParser:
