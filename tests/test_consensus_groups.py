@@ -104,3 +104,22 @@ def test_a_pair_with_a_rival_confirms_no_loop(tmp_path, capsys):
                 assert row["error"]["translation_cells"] < 3, (m.name, row)
     entries = {Path(e["input"]).name: e for e in rep["maps"]}
     assert entries["robot_2.yaml"].get("group") is None
+
+
+def test_the_tui_export_writes_each_groups_map_as_merge_does(two_buildings, tmp_path):
+    """The terminal UI's export once wrote a report listing ``merged.group1.yaml`` without
+    writing that map (and removed any earlier one of that name)."""
+    from fusionkit_tui.runner import export_result, run_merge
+
+    one, two = two_buildings
+    inputs = []
+    for name, g in (("a", one.a), ("c", two.a), ("b", one.b), ("d", two.b)):
+        save_map(g, tmp_path / f"{name}.yaml")
+        inputs.append(str(tmp_path / f"{name}.yaml"))
+    result = run_merge(inputs, MergeConfig(method="consensus"))
+    paths = export_result(result, inputs, tmp_path / "merged.yaml")
+    assert paths.groups == (tmp_path / "merged.group1.yaml",)
+    rep = json.loads((tmp_path / "merged.report.json").read_text())
+    assert rep["group_outputs"] == [str(tmp_path / "merged.group1.yaml")]
+    fused = load_map(tmp_path / "merged.group1.yaml")
+    assert np.array_equal(fused.data, result.groups[0].grid.trinary())

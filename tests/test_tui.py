@@ -276,6 +276,50 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root):
     assert main(["evaluate", str(out), "--truth", str(in_root / "run" / "truth.json"), "--json"]) == 0
 
 
+async def test_export_never_replaces_the_ground_truth_of_the_run(in_root):
+    """``fusionkit merge`` refuses an output over the run's world or a robot map of its truth;
+    the terminal UI's export once asked "will be replaced?" and wrote over ``world.yaml``."""
+    app = make_app(["run/robot_1.yaml", "run/robot_2.yaml"])
+    world = (in_root / "run" / "world.pgm").read_bytes()
+    robot_3 = (in_root / "run" / "robot_3.pgm").read_bytes()
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        await run_merge(pilot)
+        for path in ("run/world.yaml", "run/robot_3.yaml"):   # robot_3 is not an input here
+            await pilot.press("e")
+            await pilot.pause()
+            app.screen.query_one(Input).value = path
+            await pilot.press("enter")
+            await pilot.pause()
+            assert isinstance(app.screen, ExportScreen)
+            assert "ground truth" in str(app.screen.query_one("#export-error").render())
+            await pilot.press("escape")
+            await pilot.pause()
+            assert screen.export(path) is None                 # the export itself refuses too
+            await pilot.pause()
+            await pilot.press("escape")
+            await pilot.pause()
+    assert (in_root / "run" / "world.pgm").read_bytes() == world
+    assert (in_root / "run" / "robot_3.pgm").read_bytes() == robot_3
+    assert not (in_root / "run" / "world.report.json").exists()
+
+
+def test_a_folder_lists_no_map_a_merge_wrote_there(tmp_path):
+    """Maps a merge wrote are not robot maps: the output a report names, whatever the report's
+    own name (``merge --report r.json``), and the group maps beside it."""
+    from fusionkit_tui.runner import find_maps
+
+    for name in ("robot_a", "robot_b", "cli", "cli.group1", "mine", "mine.group2", "x.group1"):
+        (tmp_path / f"{name}.yaml").write_text("image: x.pgm\n")
+    (tmp_path / "r.json").write_text(json.dumps({
+        "method": "consensus", "maps": [], "output": "somewhere/else/cli.yaml",
+        "group_outputs": ["somewhere/else/cli.group1.yaml"]}))
+    (tmp_path / "mine.report.json").write_text("{}")
+    (tmp_path / "notes.json").write_text("[1, 2]")
+    assert [p.name for p in find_maps(tmp_path)] == ["robot_a.yaml", "robot_b.yaml", "x.group1.yaml"]
+
+
 async def test_cancel_stops_the_merge_and_the_app_stays_usable(in_root):
     app = make_app(["run"])
     async with app.run_test(size=(80, 24)) as pilot:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from .._atomic import check_distinct, check_not_input, check_writable, show
@@ -48,9 +48,8 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from ..executor import using
-    from ..mapio import group_map_files, save_maps
     from ..methods.consensus import ConsensusConfig
-    from ..pipeline import MergeResult, group_output_paths, merge
+    from ..pipeline import MergeResult, merge
     from ..progress import ProgressBar
 
     out = Path(args.output)
@@ -63,9 +62,8 @@ def run(args) -> int:
     inputs = list(args.maps)
     check_writable([out, image_path, report_path])
     check_distinct([("-o", out), ("the output's image", image_path), ("--report", report_path)])
-    protected, truth_files = protected_inputs(inputs), run_truth(inputs)
-    check_not_input([out, image_path, report_path], protected)
-    check_not_input([out, image_path, report_path], truth_files, what=TRUTH_FILE)
+    guard = OutputGuard.of(inputs)
+    guard.check([out, image_path, report_path])
     reference = 0
     if args.reference is not None:
         if args.reference not in inputs:
@@ -99,17 +97,8 @@ def run(args) -> int:
         result: MergeResult = merge(inputs, config=config, callback=callback)
         pairs_bar.close()
         progress.close()
-    group_paths = group_output_paths(out, len(result.groups))
-    group_files = group_paths + [q.with_suffix(".pgm") for q in group_paths]
-    check_not_input(group_files, protected)
-    check_not_input(group_files, truth_files, what=TRUTH_FILE)
-    report = result.report(inputs, output=str(args.output))
-    # One set: merged map, each group's map and the report (the commit point); group maps of an
-    # earlier merge into the same output that this one does not write are removed with it.
-    new_files = set(group_paths) | {q.with_suffix(".pgm") for q in group_paths}
-    save_maps([(result.grid, out)] + [(g.grid, q) for g, q in zip(result.groups, group_paths)],
-              (report_path, json.dumps(report, indent=2) + "\n"),
-              inputs=inputs, remove=[q for q in group_map_files(out) if q not in new_files])
+    group_paths = write_result(result, inputs, out, report_path, guard=guard,
+                               output_name=args.output)
     if not args.quiet:
         print(format_placements(result, inputs))
         print(f"fused map: {out} ({result.grid.cols}x{result.grid.rows} cells); report: {report_path}")
@@ -117,6 +106,49 @@ def run(args) -> int:
             print(f"group {group.number} ({', '.join(str(inputs[k]) for k in group.members)}), "
                   f"not linked to the reference: {path}")
     return EXIT_ALL_MERGED if result.all_merged else EXIT_SOME_LEFT_OUT
+
+
+def write_result(result, inputs, out, report_path, *, guard=None, output_name=None) -> list[Path]:
+    """Write a merge's files as one set: the fused map ``out`` (YAML and PGM), each group's map
+    beside it (``NAME.group1.yaml``, ...) and the report, written last as the commit point.
+    Group maps of an earlier merge into ``out`` that this one does not write go with it.
+
+    None of them may replace a file the merge read or the ground truth of the inputs' run
+    (``guard``, :meth:`OutputGuard.of` the inputs when not given). The report names the output
+    ``output_name`` (default ``out``) and the inputs as given. Returns the group maps' paths.
+    """
+    from ..mapio import group_map_files, save_maps
+    from ..pipeline import group_output_paths
+
+    out = Path(out)
+    guard = OutputGuard.of(inputs) if guard is None else guard
+    group_paths = group_output_paths(out, len(result.groups))
+    group_files = group_paths + [q.with_suffix(".pgm") for q in group_paths]
+    stale = [q for q in group_map_files(out) if q not in set(group_files)]
+    guard.check([out, out.with_suffix(".pgm"), report_path, *group_files, *stale])
+    report = result.report([str(p) for p in inputs], output=str(out if output_name is None else output_name))
+    save_maps([(result.grid, out)] + [(g.grid, q) for g, q in zip(result.groups, group_paths)],
+              (report_path, json.dumps(report, indent=2) + "\n"), inputs=guard.inputs, remove=stale)
+    return group_paths
+
+
+@dataclass(frozen=True)
+class OutputGuard:
+    """The files a merge's outputs must never replace: every file it reads (``inputs``) and
+    the ground truth of the inputs' run (``truth``, :func:`run_truth`)."""
+
+    inputs: tuple
+    truth: tuple
+
+    @classmethod
+    def of(cls, maps) -> "OutputGuard":
+        """The guard of a merge of the map YAML files ``maps``."""
+        return cls(tuple(protected_inputs(maps)), tuple(run_truth(maps)))
+
+    def check(self, outputs) -> None:
+        """Raise :class:`InputError` when an output path is one of the guarded files."""
+        check_not_input(outputs, self.inputs)
+        check_not_input(outputs, self.truth, what=TRUTH_FILE)
 
 
 def protected_inputs(inputs) -> list[Path]:

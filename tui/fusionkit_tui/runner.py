@@ -1,7 +1,7 @@
 """What the terminal UI does, without the UI: find maps, run a merge, score it, export it.
 
 Every step calls the same library functions as the command line (:func:`fusionkit.pipeline.merge`,
-:func:`fusionkit.mapio.save_map`, :func:`fusionkit.cli.evaluate.read_truth`,
+:func:`fusionkit.cli.merge.write_result`, :func:`fusionkit.cli.evaluate.read_truth`,
 :func:`fusionkit.metrics.evaluate_map`), so a merge made here is the merge ``fusionkit merge``
 would make with the same settings.
 """
@@ -9,16 +9,16 @@ would make with the same settings.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
-from fusionkit._atomic import check_not_input
 from fusionkit.errors import FusionkitError, InputError
 from fusionkit.pipeline import MergeConfig, MergeEvent, MergeResult, merge
 
 __all__ = ["MAP_SUFFIXES", "is_map_file", "find_maps", "truth_beside", "Evaluation",
-           "evaluate_result", "ExportPaths", "export_paths", "export_result", "protected_files",
+           "evaluate_result", "ExportPaths", "export_paths", "export_result", "output_guard",
            "run_merge", "map_labels", "initial_selection", "describe_error", "check_map"]
 
 #: File name endings the map picker lists (map_server YAML).
@@ -50,8 +50,10 @@ def find_maps(directory) -> list[Path]:
     """The robot maps of a directory, sorted by name.
 
     Every ``*.yaml`` / ``*.yml`` file directly in ``directory`` except those that are not
-    inputs to a merge: a merged map (a ``<stem>.report.json`` stands beside it) and the
-    ground-truth world that a ``truth.json`` in the directory names.
+    inputs to a merge: a merged map (a ``<stem>.report.json`` stands beside it, or a merge
+    report in the directory names it as its output), a group map of a merge
+    (``NAME.group1.yaml`` of such a map) and the ground-truth world that a ``truth.json`` in
+    the directory names.
 
     Parameters
     ----------
@@ -70,16 +72,47 @@ def find_maps(directory) -> list[Path]:
         entries = sorted(directory.iterdir())
     except OSError as exc:
         raise InputError(f"{directory}: cannot be listed ({exc.strerror or exc}); check its permissions") from None
+    merged = _merge_outputs(entries)
     out = []
     for p in entries:
         if not p.is_file() or not is_map_file(p):
             continue
-        if p.with_name(p.stem + ".report.json").exists():
+        if p.with_name(p.stem + ".report.json").exists() or p.name in merged:
+            continue
+        group = _GROUP_MAP.fullmatch(p.name)
+        if group and (group[1] + p.suffix in merged
+                      or p.with_name(group[1] + ".report.json").exists()):
             continue
         if world is not None and p.resolve() == world:
             continue
         out.append(p)
     return out
+
+
+#: a group map a merge writes beside its output NAME.yaml: NAME.group1.yaml, ...
+_GROUP_MAP = re.compile(r"(.+)\.group[1-9][0-9]{0,3}\.(yaml|yml)")
+
+
+def _merge_outputs(entries) -> set[str]:
+    """The names of the maps that merge reports among ``entries`` (a directory's files) name as
+    their output or group outputs: a report of ``fusionkit merge --report R.json`` need not be
+    named after its map."""
+    names = set()
+    for p in entries:
+        if p.suffix.lower() != ".json" or not p.is_file():
+            continue
+        try:
+            if p.stat().st_size > 16 * 1024 * 1024:
+                continue
+            doc = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, UnicodeError, ValueError, RecursionError):
+            continue
+        if not (isinstance(doc, dict) and isinstance(doc.get("maps"), list)
+                and isinstance(doc.get("output"), str)):
+            continue
+        outputs = [doc["output"], *(doc.get("group_outputs") or [])]
+        names.update(Path(o).name for o in outputs if isinstance(o, str))
+    return names
 
 
 def initial_selection(paths: Sequence) -> tuple[Path, list[Path]]:
@@ -222,59 +255,61 @@ def run_merge(inputs: Sequence, config: MergeConfig,
 
 @dataclass(frozen=True)
 class ExportPaths:
-    """The files an export writes: the map YAML, its image and the merge report."""
+    """The files an export writes: the map YAML, its image, the merge report and, for a merge
+    that left groups of maps (CONTRACTS section 6), each group's map YAML (``groups``)."""
 
     yaml: Path
     image: Path
     report: Path
+    groups: tuple = ()
 
     @property
-    def all(self) -> tuple[Path, Path, Path]:
-        return (self.yaml, self.image, self.report)
+    def all(self) -> tuple:
+        return (self.yaml, self.image, self.report,
+                *(f for g in self.groups for f in (g, g.with_suffix(".pgm"))))
 
     def existing(self) -> list[Path]:
         """Those of the files that already exist (an export would overwrite them)."""
         return [p for p in self.all if p.exists()]
 
 
-def export_paths(yaml_path) -> ExportPaths:
+def export_paths(yaml_path, groups: int = 0) -> ExportPaths:
     """The files written for the map ``yaml_path``: ``NAME.yaml``, ``NAME.pgm`` and
-    ``NAME.report.json`` beside it (the names ``fusionkit merge`` and ``fusionkit evaluate`` use).
+    ``NAME.report.json`` beside it (the names ``fusionkit merge`` and ``fusionkit evaluate`` use),
+    and ``NAME.group1.yaml``, ... for a result with ``groups`` groups.
 
     Raises
     ------
     InputError
         An empty path, or one not ending in .yaml / .yml.
     """
+    from fusionkit.pipeline import group_output_paths
+
     text = str(yaml_path).strip()
     if not text:
         raise InputError("type the path of the map YAML to write, e.g. merged.yaml")
     p = Path(text).expanduser()
     if not is_map_file(p):
         raise InputError(f"{p}: a map is saved as a .yaml file; end the name with .yaml")
-    return ExportPaths(p, p.with_suffix(".pgm"), p.with_name(p.stem + ".report.json"))
+    return ExportPaths(p, p.with_suffix(".pgm"), p.with_name(p.stem + ".report.json"),
+                       tuple(group_output_paths(p, groups)))
 
 
-def protected_files(inputs: Sequence) -> list[Path]:
-    """Files an export must never replace: each input map, the image it names and its scans."""
-    from fusionkit.mapio import map_info
-    from fusionkit.scanlog import scans_path_for
+def output_guard(inputs: Sequence):
+    """The files an export must never replace (:class:`fusionkit.cli.merge.OutputGuard`): each
+    input map, the image it names and its scans, and the ground truth of the inputs' run."""
+    from fusionkit.cli.merge import OutputGuard
 
-    out = []
-    for p in map(Path, inputs):
-        out += [p, scans_path_for(p)]
-        try:
-            out.append(Path(map_info(p)["image"]))
-        except (FusionkitError, OSError):
-            pass  # save_map still protects the image an input YAML names
-    return out
+    return OutputGuard.of([str(p) for p in inputs])
 
 
 def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPaths:
-    """Write the fused map (YAML + PGM) and the merge report (docs/formats.md).
+    """Write the fused map (YAML + PGM), each group's map and the merge report (docs/formats.md),
+    as ``fusionkit merge`` writes them (:func:`fusionkit.cli.merge.write_result`).
 
-    The files are written as one set (:func:`fusionkit.mapio.save_maps`) and no input map, image or scan log is ever overwritten;
-    existing output files are replaced (ask first).
+    The files are written as one set, the report last; no input map, image or scan log and no
+    file of the run's ground truth is ever overwritten; existing output files are replaced (ask
+    first).
 
     Parameters
     ----------
@@ -287,20 +322,14 @@ def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPat
     Raises
     ------
     InputError
-        A bad output name, a missing directory, or an output that is one of the inputs.
+        A bad output name, a missing directory, or an output that is an input or a file of the
+        run's ground truth.
     """
-    from fusionkit.mapio import group_map_files, save_maps
+    from fusionkit.cli.merge import write_result
 
-    paths = export_paths(yaml_path)
+    paths = export_paths(yaml_path, len(result.groups))
     inputs = [str(p) for p in inputs]
-    protected = protected_files(inputs)
-    check_not_input(paths.all, protected)
-    report = result.report(inputs, output=str(paths.yaml))
-    # One set with the report as its commit point: a reader never finds the map of one export
-    # beside the report of another, and group maps of an earlier merge of that name go with it.
-    save_maps([(result.grid, paths.yaml)],
-              (paths.report, json.dumps(report, indent=2) + "\n"),
-              inputs=protected, remove=group_map_files(paths.yaml))
+    write_result(result, inputs, paths.yaml, paths.report, guard=output_guard(inputs))
     return paths
 
 

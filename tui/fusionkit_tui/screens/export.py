@@ -12,7 +12,6 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Static
 
-from fusionkit._atomic import check_not_input
 from fusionkit.errors import InputError
 
 from ..runner import export_paths
@@ -23,8 +22,10 @@ __all__ = ["ExportScreen", "ConfirmScreen", "overwrite_question"]
 class ExportScreen(ModalScreen[str | None]):
     """Ask for the map YAML to write; dismisses with the typed path, or None when cancelled.
 
-    ``inputs`` are files the export must not replace (the input maps, images and scans): a
-    path that would is refused in the dialog, as is a directory that does not exist.
+    ``guard`` (:func:`..runner.output_guard`) holds the files the export must not replace
+    (the input maps, images and scans, the ground truth of their run): a path that would is
+    refused in the dialog, as is a directory that does not exist. ``groups`` is the number of
+    group maps the result has, written beside the map.
     """
 
     DEFAULT_CSS = """
@@ -67,11 +68,12 @@ class ExportScreen(ModalScreen[str | None]):
 
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, default: str, inputs=(), note: str = "") -> None:
+    def __init__(self, default: str, guard=None, note: str = "", groups: int = 0) -> None:
         super().__init__()
         self._default = default
-        self._inputs = list(inputs)
+        self._guard = guard
         self._note = note
+        self._groups = groups
 
     def compose(self) -> ComposeResult:
         with Vertical():
@@ -96,14 +98,17 @@ class ExportScreen(ModalScreen[str | None]):
         files = self.query_one("#export-files", Static)
         error = self.query_one("#export-error", Static)
         try:
-            p = export_paths(text)
+            p = export_paths(text, self._groups)
         except InputError as exc:
             files.update("")
             error.update(str(exc))
             return False
         where = p.yaml.parent
-        files.update(f"writes {p.yaml.name}, {p.image.name} and {p.report.name} in "
-                     f"{where}; enter saves, escape cancels")
+        names = [p.yaml.name, p.image.name, p.report.name]
+        if p.groups:
+            names.insert(2, f"the map of each group ({', '.join(g.name for g in p.groups)})")
+        files.update(f"writes {', '.join(names[:-1])} and {names[-1]} in {where}; enter saves, "
+                     f"escape cancels")
         if not where.is_dir():
             error.update(f"the directory {where} does not exist; create it or choose another")
             return False
@@ -111,7 +116,8 @@ class ExportScreen(ModalScreen[str | None]):
             error.update(f"the directory {where} is not writable; choose another")
             return False
         try:
-            check_not_input(p.all, self._inputs)
+            if self._guard is not None:
+                self._guard.check(p.all)
         except InputError as exc:
             error.update(str(exc))
             return False

@@ -18,7 +18,7 @@ from fusionkit.pipeline import MergeCancelled, MergeConfig, MergeEvent
 
 from ..messages import MergeFailed, MergeFinished, MergeProgress, MergeStopped
 from ..runner import (ExportPaths, describe_error, evaluate_result, export_paths, export_result,
-                      map_labels, protected_files, run_merge, truth_beside)
+                      map_labels, output_guard, run_merge, truth_beside)
 from ..widgets.map_picker import MapsPane, MapTree
 from ..widgets.result_panel import ResultPanel
 from ..widgets.run_panel import RunPanel
@@ -331,14 +331,14 @@ class MainScreen(Screen):
             note = (f"The last run {self.last_run_outcome}: this exports the EARLIER result, the "
                     f"merge of {self.result_time} ({merged} of {len(self.result.placements)} maps "
                     f"merged).")
-        self.app.push_screen(ExportScreen(self.default_export_path(), protected_files(self.inputs),
-                                          note=note), self._export_to)
+        self.app.push_screen(ExportScreen(self.default_export_path(), output_guard(self.inputs),
+                                          note=note, groups=len(self.result.groups)), self._export_to)
 
     def _export_to(self, path: str | None) -> None:
         if path is None:
             return
         try:
-            paths = export_paths(path)
+            paths = export_paths(path, len(self.result.groups))
         except InputError as exc:
             self.notify(str(exc), severity="error")
             return
@@ -363,9 +363,10 @@ class MainScreen(Screen):
             self.notify(why, title="Export failed", severity="error", timeout=10)
             # the dialog again, with the path typed, so that a key pressed next edits it rather
             # than being taken as a command of the main screen
-            self.app.push_screen(ExportScreen(path, protected_files(self.inputs),
+            self.app.push_screen(ExportScreen(path, output_guard(self.inputs),
                                               note=f"Export failed: {why}. Change the path, or "
-                                                   f"escape."), self._export_to)
+                                                   f"escape.", groups=len(self.result.groups)),
+                                 self._export_to)
             return None
         self.exported = paths
         self.notify(f"map {paths.yaml} (+ {paths.image.name}), report {paths.report}",
