@@ -160,6 +160,29 @@ def test_the_same_placement_fixed_better_on_grown_maps_replaces_the_held_one_at_
     assert "refined at x=1.270 m" in d.line()
 
 
+def test_a_closer_estimate_that_scores_higher_is_taken_however_close():
+    """Within 2 cells and 1 degree an estimate used to confirm the held transform unscored: a
+    placement 1.5 cells off stayed 1.5 cells off while the maps grew."""
+    tr = _tracker()
+    old, near = fk.Transform2D(1, 2, 0.1), fk.Transform2D(1.15, 2, 0.1)
+    tr.decide("/r", old, 0.9, "", 0.1)
+    d = tr.decide("/r", near, 0.9, "", 0.1, score={old: 0.95, near: 0.99}.__getitem__)
+    assert d.action == "refined" and tr.held("/r")[0] == near
+    d = tr.decide("/r", old, 0.9, "", 0.1, score={old: 0.95, near: 0.99}.__getitem__)
+    assert d.action == "confirmed" and tr.held("/r")[0] == near       # not back to the worse one
+
+
+def test_a_pending_switch_is_known_to_the_node():
+    tr = _tracker()
+    old, new = fk.Transform2D(0, 0, 0), fk.Transform2D(5, 0, 0)
+    tr.decide("/r", old, 0.9, "", 0.1)
+    assert not tr.pending()
+    tr.decide("/r", new, 0.9, "", 0.1, score=lambda t: 0.9 if t == new else 0.2)
+    assert tr.pending()
+    assert tr.decide("/r", new, 0.9, "", 0.1, score=lambda t: 0.9 if t == new else 0.2).action == "switched"
+    assert not tr.pending()
+
+
 def test_an_interrupted_run_of_better_estimates_starts_over():
     tr = _tracker()
     old, new = fk.Transform2D(0, 0, 0), fk.Transform2D(5, 0, 0)

@@ -21,6 +21,7 @@ class Robot:
     grid: OccupancyGrid | None = None
     received: float = 0.0
     updates: int = 0
+    known: bool = False          # its last map holds a known cell (an empty one is waited out)
     problem: str = ""
     vanished: bool = False
     last_action: str = ""

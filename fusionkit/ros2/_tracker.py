@@ -6,7 +6,7 @@ new estimate as it comes makes the merged map jump whenever one estimate is off;
 it scores higher on the current maps by ``switch_margin`` in ``switch_confirmations`` successive
 estimations that agree with each other. A new estimate near the accepted one (a few cells and
 degrees: the same placement, fixed better on the grown maps) replaces it at once when it scores
-higher.
+higher, however close it is.
 """
 
 from __future__ import annotations
@@ -97,6 +97,10 @@ class Tracker:
         self._held[robot] = _Held(transform, float(confidence))
         self._pending.pop(robot, None)
 
+    def pending(self) -> bool:
+        """Whether a switch is waiting for more confirming estimations."""
+        return bool(self._pending)
+
     def forget(self, robot: str) -> None:
         self._held.pop(robot, None)
         self._pending.pop(robot, None)
@@ -117,7 +121,9 @@ class Tracker:
             Cell size (m) of the robot's map, for :func:`same_place`.
         score : callable(Transform2D) -> float, optional
             Scores a transform of this robot on the current maps (0-1, higher is better); asked
-            only when the estimate differs from the accepted transform.
+            only when the estimate differs from the accepted transform. Without it an estimate
+            within :func:`same_place` confirms the accepted transform and any other is kept
+            out.
         """
         held = self._held.get(robot)
         if estimate is not None and confidence < self.min_confidence:
@@ -132,13 +138,13 @@ class Tracker:
             self._pending.pop(robot, None)
             return Decision(robot, "kept", held.transform, held.confidence,
                             f"new estimate refused: {reason or 'no confident placement'}")
-        if same_place(estimate, held.transform, resolution):
+        s_new = s_old = None
+        if score is not None and estimate != held.transform:
+            s_new, s_old = float(score(estimate)), float(score(held.transform))
+        if same_place(estimate, held.transform, resolution) and not (s_new is not None and s_new > s_old):
             self._pending.pop(robot, None)
             held.confidence = confidence
             return Decision(robot, "confirmed", held.transform, confidence)
-        s_new = s_old = None
-        if score is not None:
-            s_new, s_old = float(score(estimate)), float(score(held.transform))
         if s_new is not None and s_new > s_old and near_place(estimate, held.transform, resolution):
             self._pending.pop(robot, None)
             self._held[robot] = _Held(estimate, confidence)

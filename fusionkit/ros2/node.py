@@ -194,8 +194,9 @@ class MergeNode:
             return
         if r.problem:
             self.log.info(f"{r.name}: valid map again")
+        known = bool(grid.known_mask().any())
         with self._lock:
-            if self.reference is None and not self.s.known_init_poses:
+            if self.reference is None and not self.s.known_init_poses and known:
                 # the first robot with a valid map: its map frame is the merged frame
                 self.reference = r.name
                 self.tracker.fix(r.name, _identity())
@@ -203,6 +204,7 @@ class MergeNode:
                 self.log.info(f"{r.name}: reference robot (its map frame is the merged frame)")
                 self._publish_pose(r)
             r.problem = ""
+            r.known = known
             r.grid = grid
             r.received = time.monotonic()
             r.updates += 1
@@ -272,11 +274,12 @@ class MergeNode:
                 with self._lock:
                     version = (self._map_version, self._held_version)
                     placed = [(r.grid, self.tracker.held(n)) for n, r in self.robots.items()
-                              if r.grid is not None and self.tracker.held(n) is not None]
+                              if r.grid is not None and r.known and self.tracker.held(n) is not None]
                     first = self.reference
                     ref_grid = self.robots[first].grid if first in self.robots else None
                 if not placed:
                     done = version
+                    self._publish_status()
                     continue
                 if ref_grid is not None:  # the reference first: its resolution is the merged one
                     placed.sort(key=lambda gh: gh[0] is not ref_grid)
@@ -310,7 +313,10 @@ class MergeNode:
                 version = self._map_version
                 ref = self.reference
                 snapshot = [(n, r.grid) for n, r in self.robots.items() if r.grid is not None]
-            if version == done or ref not in dict(snapshot) or len(snapshot) < 2:
+            # a switch waiting for its confirmations is estimated again on unchanged maps: a
+            # robot whose map stopped growing must not keep a transform found worse
+            if (version == done and not self.tracker.pending()) or ref not in dict(snapshot) \
+                    or len(snapshot) < 2:
                 if ref is not None and snapshot and ref not in dict(snapshot):
                     self._once(("noref", ref), f"waiting for the reference robot {ref}'s map", "info")
                 if version != done:  # say what is known (the robots, none placed yet) meanwhile
@@ -326,11 +332,13 @@ class MergeNode:
             except FusionkitError as exc:
                 self._once(("estimate", str(exc)), f"estimation failed: {exc}")
                 done = version
+                self._publish_status()
                 continue
             except Exception as exc:  # noqa: BLE001 - log once, go on
                 self._once(("estimate", type(exc).__name__),
                            f"estimation failed: {type(exc).__name__}: {exc}", "error")
                 done = version
+                self._publish_status()
                 continue
             self.last_estimation_s = round(time.perf_counter() - t0, 3)
             self.estimations += 1
