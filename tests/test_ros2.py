@@ -77,7 +77,8 @@ def test_settings_take_map_merge_defaults_and_init_poses():
     ({"known_init_poses": 3}, "parameter known_init_poses: expected true or false"),
     ({"method": "magic"}, "parameter method: 'magic' is not a method"),
     ({"min_confidence": 1.5}, "parameter min_confidence: expected a number between 0 and 1"),
-    ({"/r1/map_merge/init_pose_x": 1.0}, "give /r1/map_merge/init_pose_y, /r1/map_merge/init_pose_yaw"),
+    ({"known_init_poses": True, "/r1/map_merge/init_pose_x": 1.0},
+     "give /r1/map_merge/init_pose_y, /r1/map_merge/init_pose_yaw"),
     ({"merged_map_topic": "bad topic"}, "parameter merged_map_topic: 'bad topic' is not a ROS 2 topic name"),
     ({"robot_map_topic": "9map"}, "parameter robot_map_topic: '9map' is not a ROS 2 topic name"),
 ])
@@ -85,6 +86,23 @@ def test_bad_parameters_say_what_to_fix(values, message):
     with pytest.raises(fk.InputError) as info:
         settings_from(values)
     assert message in str(info.value)
+
+
+def test_initial_poses_are_not_read_unless_known_init_poses_is_set():
+    """As map_merge: with known_init_poses false, a half-given initial pose is no error (it
+    once stopped the node with exit 2)."""
+    assert settings_from({"/robot_9/map_merge/init_pose_x": 1.0}).init_poses == {}
+
+
+def test_an_initial_pose_written_nested_is_said_how_to_write_it():
+    from fusionkit.ros2._params import unknown_parameter
+
+    assert unknown_parameter("robot_3.map_merge.init_pose_x").endswith(
+        "ignored (an initial pose is written flat, as map_merge's params.yaml does: "
+        "/robot_3/map_merge/init_pose_x: VALUE)")
+    assert unknown_parameter("merging_rte") == ("parameter merging_rte is not one of this node's; "
+                                                "ignored (the parameters: fusionkit ros2 "
+                                                "merge-node --help)")
 
 
 @pytest.mark.parametrize("topic, robot, message", [

@@ -11,7 +11,8 @@ from dataclasses import dataclass, field
 
 from .. import InputError, Transform2D
 
-__all__ = ["NodeSettings", "PARAMETERS", "INIT_POSE", "init_poses_from", "settings_from"]
+__all__ = ["NodeSettings", "PARAMETERS", "INIT_POSE", "init_poses_from", "settings_from",
+           "unknown_parameter"]
 
 #: name -> (default, kind, help). The first block are multirobot_map_merge's (same defaults).
 PARAMETERS: dict = {
@@ -149,5 +150,22 @@ def settings_from(values: dict) -> NodeSettings:
     for name, (default, kind, _help) in PARAMETERS.items():
         if name in values and values[name] is not None:
             kw[name] = _coerce(name, values[name], kind)
-    kw["init_poses"] = init_poses_from(values)
+    if kw.get("known_init_poses", PARAMETERS["known_init_poses"][0]):
+        kw["init_poses"] = init_poses_from(values)
+    # else, as map_merge, initial poses are not read (a half-given one is no error)
     return NodeSettings(**kw)
+
+
+#: an initial pose written nested in a parameters file (``robot_3: map_merge: init_pose_x:``)
+_NESTED_INIT_POSE = re.compile(r"^(?P<robot>.+)\.map_merge\.init_pose_(?P<axis>x|y|z|yaw)$")
+
+
+def unknown_parameter(name: str) -> str:
+    """The warning for a parameter the node does not know (it is ignored, as map_merge does)."""
+    m = _NESTED_INIT_POSE.match(name)
+    if m:
+        return (f"parameter {name} is not one of this node's; ignored (an initial pose is "
+                f"written flat, as map_merge's params.yaml does: "
+                f"/{m['robot'].replace('.', '/')}/map_merge/init_pose_{m['axis']}: VALUE)")
+    return (f"parameter {name} is not one of this node's; ignored (the parameters: fusionkit "
+            f"ros2 merge-node --help)")

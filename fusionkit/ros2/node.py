@@ -24,7 +24,7 @@ import time
 from .. import FusionkitError, MergeCancelled
 from ._convert import BadMap, fill_msg, fill_pose, grid_from_msg
 from ._names import is_robot_map_topic, parent_namespace, robot_slug
-from ._params import INIT_POSE, PARAMETERS, NodeSettings, settings_from
+from ._params import INIT_POSE, PARAMETERS, NodeSettings, settings_from, unknown_parameter
 from ._robots import Robot, estimate_round
 from ._tracker import Tracker
 
@@ -51,8 +51,7 @@ def read_settings(node) -> NodeSettings:
     for name in sorted(values):
         if name not in PARAMETERS and not INIT_POSE.match(name) and name not in ROS_OWN \
                 and not name.startswith("qos_overrides."):
-            node.get_logger().warn(f"parameter {name} is not one of this node's; ignored (the "
-                                   f"parameters: fusionkit ros2 merge-node --help)")
+            node.get_logger().warn(unknown_parameter(name))
     return settings
 
 
