@@ -117,6 +117,23 @@ def _sweep(targets: Iterable[Path]) -> None:
                         os.unlink(d / entry)
 
 
+def recover_set(commit: os.PathLike | str, leftovers) -> None:
+    """Before a folder is judged by what it holds: finish or undo a write of the set whose
+    commit file is ``commit`` that a kill cut short, and remove the temporary and backup files
+    of killed writes whose names match ``leftovers`` (a compiled pattern of file names).
+    Waits for a write in progress in that folder."""
+    commit = Path(commit)
+    folder = _parent(commit)
+    if not folder.is_dir():
+        return
+    with _locked([folder]):
+        _recover(commit)
+        for entry in os.listdir(folder):
+            if leftovers.fullmatch(entry) and not os.path.isdir(folder / entry):
+                with contextlib.suppress(OSError):
+                    os.unlink(folder / entry)
+
+
 def _journal_path(commit: Path) -> Path:
     return _parent(commit) / f".{commit.name}{_JOURNAL}"
 

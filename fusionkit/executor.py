@@ -162,6 +162,30 @@ def _process_call(fn, token, task):
     return fn(_SHARED[token], task)
 
 
+def _nothing() -> None:
+    return None
+
+
+def _start_workers(pool: ProcessPoolExecutor, count: int) -> None:
+    """Start the ``count`` workers of ``pool`` now, with SIGINT blocked while they are made.
+
+    A worker keeps the blocked signal for its life (the mask goes through ``exec``): a Ctrl-C
+    at the terminal reaches every process of its group, and this process, not each worker, is
+    the one to stop the run (the workers printed a traceback each). Here a Ctrl-C pressed
+    meanwhile waits until the workers are started, then interrupts as usual: landing while
+    the pool made a worker, it left workers that nobody told to end, and the exit waited for
+    them for ever.
+    """
+    main = threading.current_thread() is threading.main_thread()
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if main else None
+    try:
+        for _ in range(count):   # a task submitted while no worker is idle starts one
+            pool.submit(_nothing)
+    finally:
+        if before is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, before)
+
+
 class LocalProcesses(Executor):
     """A pool of ``workers`` fresh interpreters (``spawn``: forking a process whose numba
     kernels started threads is unsafe). ``shared`` is sent to each worker once, when the pool
@@ -177,21 +201,48 @@ class LocalProcesses(Executor):
         self._token = 0
         self._pool = None
         self._pool_shared = None
+        self._children_before: set = set()
 
     def map(self, fn, tasks, *, shared=None, progress=None):
         tasks = list(tasks)
-        if self._pool is None or self._pool_shared is not shared:
-            # a pool per shared data: its workers received it once, when they started
-            self.close()
-            self._token += 1
-            ctx = multiprocessing.get_context("spawn")
-            self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx,
-                                             initializer=_process_init,
-                                             initargs=(self._token, shared))
-            self._pool_shared = shared
-        pool, token = self._pool, self._token
-        return _ordered(lambda t: pool.submit(_process_call, fn, token, t), tasks, progress,
-                        self.workers)
+        try:
+            if self._pool is None or self._pool_shared is not shared:
+                # a pool per shared data: its workers received it once, when they started
+                self.close()
+                self._token += 1
+                self._children_before = set(multiprocessing.active_children())
+                ctx = multiprocessing.get_context("spawn")
+                self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx,
+                                                 initializer=_process_init,
+                                                 initargs=(self._token, shared))
+                self._pool_shared = shared
+                _start_workers(self._pool, self.workers)
+            pool, token = self._pool, self._token
+            return _ordered(lambda t: pool.submit(_process_call, fn, token, t), tasks, progress,
+                            self.workers)
+        except BaseException:
+            # Ctrl-C, SIGTERM or a failed task: the workers are stopped, not waited for. An
+            # interrupt that lands while the pool starts its workers leaves workers that no
+            # one tells to end, and the interpreter's exit then waits for them for ever.
+            self._stop_workers()
+            raise
+
+    def _stop_workers(self) -> None:
+        pool, self._pool, self._pool_shared = self._pool, None, None
+        if pool is None:
+            return
+        # the pool's workers, and children started since the pool was (a worker being
+        # spawned is not yet in the pool's table)
+        procs = set((getattr(pool, "_processes", None) or {}).values())
+        procs |= set(multiprocessing.active_children()) - self._children_before
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            p.join(5)
+            if p.is_alive():
+                p.kill()
+                p.join(5)
+        pool.shutdown(wait=False, cancel_futures=True)
 
     def close(self) -> None:
         if self._pool is not None:

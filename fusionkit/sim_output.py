@@ -7,7 +7,7 @@ import json
 import re
 from pathlib import Path
 
-from ._atomic import check_not_input, check_out_dir, made_out_dir, write_set
+from ._atomic import check_not_input, check_out_dir, made_out_dir, recover_set, write_set
 from .errors import FusionkitError, InputError
 from .mapping import MappingConfig
 
@@ -17,6 +17,12 @@ __all__ = ["write_run", "check_run_dir"]
 _RUN_SUFFIXES = (".yaml", ".pgm", ".scans.npz")
 #: Names a simulation writes; only files of these names are ever removed from a run folder.
 _ROBOT_NAME = re.compile(r"robot_[1-9][0-9]{0,3}")
+
+
+#: Temporary and backup files of a killed write of a run (``.robot_3.pgm.<token>.tmp``) and
+#: of its journal
+_LEFTOVER = re.compile(r"\.(robot_[1-9][0-9]{0,3}(\.yaml|\.pgm|\.scans\.npz)|world\.(yaml|pgm)"
+                       r"|truth\.json)\.[0-9a-f]{12}(\.tmp|\.bak|\.journal\.tmp)")
 
 
 def _previous_robot_files(out: Path) -> list[Path]:
@@ -43,6 +49,8 @@ def check_run_dir(out_dir) -> Path:
     """Refuse, before any work, a run folder :func:`write_run` would not write: a file, a folder
     that is not writable, or a non-empty folder without the truth.json of an earlier run."""
     out = check_out_dir(out_dir)
+    # a write of a run killed mid-way is finished or undone first (then judged as it stands)
+    recover_set(out / "truth.json", _LEFTOVER)
     try:
         nonempty = out.is_dir() and any(out.iterdir())
     except OSError as exc:

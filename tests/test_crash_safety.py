@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import signal
 import subprocess
 import sys
@@ -432,3 +433,68 @@ def test_a_failed_write_takes_back_the_folders_it_made(tmp_path, monkeypatch, ca
     assert code == (130 if isinstance(fault, KeyboardInterrupt) else 2), capsys.readouterr().err
     assert sorted(p.name for p in (tmp_path / "have").iterdir()) == \
         (["tiny.log"] if command == "import" else [])
+
+
+_RUN_CHILD = textwrap.dedent("""
+    import os, pickle, signal, sys
+    from pathlib import Path
+    from fusionkit import _atomic
+    from fusionkit.sim_output import write_run
+    sim_file, out, k = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3])
+    real, calls = os.replace, []
+    def killed(src, dst):
+        calls.append(dst)
+        if len(calls) == k:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(src, dst)
+    _atomic.os.replace = killed
+    write_run(pickle.loads(sim_file.read_bytes()), out)
+""")
+
+
+@pytest.fixture(scope="module")
+def two_runs(tmp_path_factory):
+    """Two small simulations pickled: an earlier run of three robots, a new one of two."""
+    from fusionkit.simulate import SimulationConfig, simulate
+    from fusionkit.worlds import default_world
+
+    d = tmp_path_factory.mktemp("runs")
+    (d / "old.pkl").write_bytes(pickle.dumps(simulate(default_world(), SimulationConfig(
+        robots=3, poses=60, seed=1))))
+    (d / "new.pkl").write_bytes(pickle.dumps(simulate(default_world(), SimulationConfig(
+        robots=2, poses=60, seed=2))))
+    return d
+
+
+@pytest.mark.parametrize("earlier", [True, False], ids=["over an earlier run", "into a new folder"])
+def test_a_run_killed_while_written_is_finished_or_undone_by_the_next_write(tmp_path, two_runs,
+                                                                           earlier):
+    """``kill -9`` during ``simulate --out D`` left a journal and temporary files in D, and the
+    next ``simulate --out D`` refused D ("not empty and holds no truth.json")."""
+    from fusionkit.sim_output import check_run_dir, write_run
+
+    old = pickle.loads((two_runs / "old.pkl").read_bytes())
+    new_sim = pickle.loads((two_runs / "new.pkl").read_bytes())
+    counted = tmp_path / "counted"
+    calls = []
+    real = os.replace
+    _atomic.os.replace = lambda src, dst: (calls.append(dst), real(src, dst))[1]
+    try:
+        write_run(new_sim, counted)
+    finally:
+        _atomic.os.replace = real
+    for k in range(1, len(calls) + 1):
+        out = tmp_path / f"k{k}"
+        if earlier:
+            write_run(old, out)
+        before = {p.name: p.read_bytes() for p in out.iterdir()} if earlier else {}
+        proc = subprocess.run([sys.executable, "-c", _RUN_CHILD, str(two_runs / "new.pkl"), str(out),
+                               str(k)], cwd=ROOT, capture_output=True, timeout=120,
+                              env={**os.environ, "NUMBA_THREADING_LAYER": "threadsafe"})
+        assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()[-2000:]
+        check_run_dir(out)                                   # not refused: recovered first
+        now = {p.name: p.read_bytes() for p in out.iterdir()} if out.exists() else {}
+        new = {p.name: p.read_bytes() for p in counted.iterdir()}
+        assert now in (before, new), f"killed at rename {k}: {sorted(now)}"
+        write_run(new_sim, out)
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == new, f"killed at rename {k}"

@@ -130,6 +130,61 @@ def test_bench_on_a_local_cluster_equals_the_in_process_bench(cluster):
                           here.showcase["fused"]["consensus"]["data"])
 
 
+def test_a_bench_of_map_files_runs_on_workers_that_do_not_have_them(cluster, tmp_path, monkeypatch):
+    """A cluster's workers were sent each case's map path, relative to where ``bench`` ran, and
+    failed with "w/cave.yaml: no such map file"; the worlds now go with the cases. The workers
+    here started in another folder, as on another machine."""
+    from fusionkit.bench import find_worlds
+    from fusionkit.mapio import save_map
+    from fusionkit.worlds import make_world
+
+    (tmp_path / "w").mkdir()
+    save_map(make_world("cave", 0), tmp_path / "w" / "cave.yaml")
+    monkeypatch.chdir(tmp_path)
+    worlds, _ = find_worlds(["w"])
+    cfg = BenchConfig(methods=("hough-spectrum",), modes=("crop",), robots=(2,), cases=2, seed=4)
+    here = run_bench(worlds, cfg)
+    with deadline(300):
+        there = run_bench(worlds, cfg, executor=cluster)
+    assert _strip(there.cases) == _strip(here.cases)
+
+
+def _blocked_signals(shared, task):
+    return sorted(int(s) for s in signal.pthread_sigmask(signal.SIG_BLOCK, []))
+
+
+def test_local_workers_leave_ctrl_c_to_the_process_that_started_them():
+    """A Ctrl-C at the terminal reaches every process of the group: each worker printed a
+    KeyboardInterrupt traceback. The workers start with SIGINT blocked; this process is not
+    left with it blocked."""
+    ex = LocalProcesses(2)
+    try:
+        with deadline(120):
+            masks = ex.map(_blocked_signals, range(4))
+    finally:
+        ex.close()
+    assert all(int(signal.SIGINT) in m for m in masks)
+    assert signal.SIGINT not in signal.pthread_sigmask(signal.SIG_BLOCK, [])
+
+
+def test_an_interrupted_local_run_stops_its_workers():
+    """Interrupted, the run stops its workers instead of waiting for them: an interrupt that
+    landed while the pool started them left workers no one told to end, and the exit hung."""
+    import multiprocessing
+
+    before = set(multiprocessing.active_children())   # (a module's Dask cluster among them)
+    ex = LocalProcesses(2)
+
+    def interrupt(done, total):
+        if done >= 1:
+            raise KeyboardInterrupt
+
+    with deadline(120), pytest.raises(KeyboardInterrupt):
+        ex.map(_slow_square, range(20), shared={"offset": 0}, progress=interrupt)
+    assert set(multiprocessing.active_children()) - before == set()
+    ex.close()
+
+
 def _free_port() -> int:
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))

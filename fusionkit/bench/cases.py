@@ -31,9 +31,26 @@ class WorldSpec:
     builtin: str | None = None
 
 
-@lru_cache(maxsize=32)
+#: Worlds handed to this process with the cases (:func:`given_worlds`), by spec
+_GIVEN: dict = {}
+
+
+def given_worlds(worlds: dict) -> None:
+    """Have :func:`load_world` answer the specs of ``worlds`` (``{WorldSpec: grid}``) with the
+    grids given: a worker on another machine need not hold the map files at the same path."""
+    global _GIVEN
+    _GIVEN = worlds
+
+
 def load_world(spec: WorldSpec) -> OccupancyGrid:
-    """The world's grid in its three states (cached per process)."""
+    """The world's grid in its three states (cached per process; a world handed over by
+    :func:`given_worlds` is not read again)."""
+    given = _GIVEN.get(spec)
+    return given if given is not None else _load_world(spec)
+
+
+@lru_cache(maxsize=32)
+def _load_world(spec: WorldSpec) -> OccupancyGrid:
     if spec.builtin is not None:
         from ..worlds import make_world
         g = make_world(spec.builtin, 0)

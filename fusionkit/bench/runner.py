@@ -15,7 +15,7 @@ from ..errors import FusionkitError, InputError
 from ..executor import Executor, InProcess, LocalProcesses
 from ..grid import OccupancyGrid
 from ..transform import Transform2D
-from .cases import CaseSpec, WorldSpec, make_case, plan_cases
+from .cases import CaseSpec, WorldSpec, given_worlds, load_world, make_case, plan_cases
 from .config import BenchConfig
 
 __all__ = ["run_case", "BenchResult", "run_bench"]
@@ -99,7 +99,9 @@ def run_case(spec: CaseSpec, config: BenchConfig, keep_grids: bool = False) -> d
     return out
 
 
-def _run_one(config, task):
+def _run_one(shared, task):
+    config, worlds = shared
+    given_worlds(worlds)
     spec, keep = task
     return run_case(spec, config, keep_grids=keep)
 
@@ -137,7 +139,10 @@ def run_bench(worlds: Sequence[WorldSpec], config: BenchConfig, *, jobs: int = 1
             progress(done, total, "")
 
     # each case is built from its own seed where it runs; records come back in case order
-    records = ex.map(_run_one, tasks, shared=config, progress=tick)
+    # the worlds read from files go with the cases: a worker elsewhere (a Dask cluster) has
+    # neither the files nor the folder their paths are relative to
+    worlds_used = {s.world: load_world(s.world) for s in specs if s.world.path is not None}
+    records = ex.map(_run_one, tasks, shared=(config, worlds_used), progress=tick)
     showcase = records[show].pop("_grids", None)
     if showcase is not None:
         showcase["index"] = show
