@@ -11,7 +11,7 @@ from ._atomic import check_not_input, check_out_dir, made_out_dir, recover_set, 
 from .errors import FusionkitError, InputError
 from .mapping import MappingConfig
 
-__all__ = ["write_run", "check_run_dir"]
+__all__ = ["write_run", "check_run_dir", "merges_of_run"]
 
 
 _RUN_SUFFIXES = (".yaml", ".pgm", ".scans.npz")
@@ -43,6 +43,36 @@ def _previous_robot_files(out: Path) -> list[Path]:
         if isinstance(n, str) and _ROBOT_NAME.fullmatch(n):
             files += [out / (n + s) for s in _RUN_SUFFIXES]
     return files
+
+
+def merges_of_run(out: Path) -> list[Path]:
+    """The files of merges of an earlier run's robot maps that stand in its folder ``out``: for
+    each merge report there whose inputs are all maps named as a simulation names them
+    (``robot_K.yaml``), the report, the merged map it names (YAML and image) and its group maps.
+    A new run into ``out`` makes them wrong: they would be scored against the new truth."""
+    from ._inputs import read_json
+
+    found: list[Path] = []
+    try:
+        entries = sorted(out.iterdir()) if out.is_dir() else []
+    except OSError:
+        return []
+    for report in entries:
+        if report.suffix != ".json" or report.name == "truth.json" or not report.is_file():
+            continue
+        try:
+            doc = read_json(report, "merge report")
+            inputs = [Path(m["input"]).name for m in doc["maps"]]
+            outputs = [Path(doc["output"]).name, *(Path(g).name for g in doc.get("group_outputs") or [])]
+        except (FusionkitError, TypeError, KeyError, AttributeError):
+            continue
+        if not inputs or not all(_ROBOT_NAME.fullmatch(n.removesuffix(".yaml")) for n in inputs):
+            continue
+        found.append(report)
+        for name in outputs:
+            if name.endswith((".yaml", ".yml")) and not _ROBOT_NAME.fullmatch(name.rsplit(".", 1)[0]):
+                found += [out / name, (out / name).with_suffix(".pgm")]
+    return [p for p in dict.fromkeys(found) if p.is_file()]
 
 
 def check_run_dir(out_dir) -> Path:
@@ -84,8 +114,9 @@ def write_run(sim, out_dir, *, world_path=None, stale=()) -> Path:
         The map file the world was loaded from; it is recorded, and never overwritten or
         removed (nor the image it names, nor a scan log beside it).
     stale : paths, optional
-        Files made from the earlier run that the new run makes wrong (a merged map of the old
-        robots); removed with the same commit.
+        More files made from the earlier run that the new run makes wrong; removed with the
+        same commit, as are the merges of its robots that stand in the folder
+        (:func:`merges_of_run`).
 
     Raises
     ------
@@ -113,7 +144,7 @@ def write_run(sim, out_dir, *, world_path=None, stale=()) -> Path:
     check_not_input([out / f for f in files], protected)
     keep = {out / f for f in files}
     inputs = {q.resolve() for q in protected}
-    stale = [p for p in [*previous, *map(Path, stale)]
+    stale = [p for p in dict.fromkeys([*previous, *map(Path, stale), *merges_of_run(out)])
              if p not in keep and p.is_file() and p.resolve() not in inputs]
 
     payloads = []

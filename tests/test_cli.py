@@ -205,3 +205,19 @@ def test_a_merge_never_writes_over_the_ground_truth_of_the_inputs_run(tmp_path, 
                  str(tmp_path / "m.yaml"), "--report", str(run / "truth.json")]) == 2
     assert "ground truth" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in run.iterdir()} == before
+
+
+def test_a_new_run_into_a_folder_takes_the_merges_of_the_old_robots_with_them(tmp_path, capsys):
+    """``simulate --out D`` over an earlier run kept D/merged.yaml, a merge of the old robots,
+    and ``evaluate`` then scored it against the new truth without a word."""
+    run = tmp_path / "run"
+    assert main(["simulate", "--robots", "3", "--poses", "40", "--out", str(run), "--quiet"]) == 0
+    robots = [str(run / "robot_1.yaml"), str(run / "robot_2.yaml")]
+    main(["merge", *robots, "-o", str(run / "merged.yaml"), "--quiet"])
+    main(["merge", *robots, "-o", str(run / "m2.yaml"), "--report", str(run / "r.json"), "--quiet"])
+    (run / "notes.json").write_text('{"mine": true}')
+    assert main(["simulate", "--robots", "2", "--poses", "40", "--seed", "5", "--out", str(run),
+                 "--quiet"]) == 0
+    assert sorted(p.name for p in run.iterdir()) == [
+        "notes.json", "robot_1.pgm", "robot_1.scans.npz", "robot_1.yaml", "robot_2.pgm",
+        "robot_2.scans.npz", "robot_2.yaml", "truth.json", "world.pgm", "world.yaml"]

@@ -391,3 +391,25 @@ def test_a_robots_own_map_is_scored_in_its_own_frame(scene, capsys):
                  "--reference", "robot_1", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["reference"] == "robot_1" and out["metrics"]["precision"] < 50.0
+
+
+def test_a_map_of_another_run_is_refused_from_any_folder(tmp_path, monkeypatch, capsys):
+    """The report names its inputs relative to where merge ran; evaluated from another folder,
+    none was found, the file names matched the other run's robots, and a merge of one run was
+    scored against another's truth (exit 0, precision 7.7 %)."""
+    from fusionkit.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    for run, seed in (("three", "2"), ("default", "3")):
+        assert main(["simulate", "--robots", "2", "--poses", "60", "--seed", seed, "--out",
+                     f"runs/{run}", "--quiet"]) == 0
+    main(["merge", "runs/three/robot_1.yaml", "runs/three/robot_2.yaml", "-o",
+          "runs/three/merged.yaml", "--quiet"])
+    (tmp_path / "elsewhere").mkdir()
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "runs/three/merged.yaml"), "--truth",
+                 str(tmp_path / "runs/default/truth.json")]) == 2
+    assert "is not in the run of" in capsys.readouterr().err
+    assert main(["evaluate", str(tmp_path / "runs/three/merged.yaml"), "--truth",
+                 str(tmp_path / "runs/three/truth.json"), "--json"]) == 0

@@ -203,7 +203,7 @@ def robot_of(truth: Truth, path_text: str, *, bases=(), others=()) -> str:
     A robot of a truth.json is the map its ``map`` names, else ``NAME.yaml`` beside truth.json
     (the layout ``fusionkit simulate`` writes). ``path_text`` is a map's path as a merge report gives it: relative to
     the directory the merge was run in, tried from the current directory and from each of
-    ``bases``. When the file is found, it must be one of the truth's robot maps: two runs both
+    ``bases`` (the first place it is found decides). When the file is found, it must be one of the truth's robot maps: two runs both
     have a ``robot_1.yaml``, and a map of another run has no true transform here. When it is
     found nowhere (the maps were moved), the file name decides, unless another map of
     ``others`` has the same name.
@@ -319,7 +319,9 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
     robots = truth_info.robots
 
     if rep is not None:
-        bases = (report_path.parent,)
+        # a report names its inputs relative to the folder merge ran in: most often the
+        # output's folder or one above it (merge a/b/robot_1.yaml ... -o a/b/merged.yaml)
+        bases = (report_path.parent, *report_path.parent.resolve().parents)
         inputs = [m["input"] for m in rep["maps"]]
         try:
             ref = robot_of(truth_info, rep["reference"], bases=bases, others=inputs)
