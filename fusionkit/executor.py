@@ -34,6 +34,7 @@ import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolExecutor, wait
 from typing import Any, Callable, Iterator, Sequence
 
+from . import _signals
 from .errors import InputError
 
 __all__ = ["Executor", "InProcess", "LocalProcesses", "DaskExecutor", "make_executor", "using",
@@ -162,28 +163,29 @@ def _process_call(fn, token, task):
     return fn(_SHARED[token], task)
 
 
-def _nothing() -> None:
-    return None
+@contextlib.contextmanager
+def _sigint_held() -> Iterator[None]:
+    """SIGINT (and SIGTERM) held back for the block (the main thread only; delivered as usual,
+    a KeyboardInterrupt, right after it).
 
-
-def _start_workers(pool: ProcessPoolExecutor, count: int) -> None:
-    """Start the ``count`` workers of ``pool`` now, with SIGINT blocked while they are made.
-
-    A worker keeps the blocked signal for its life (the mask goes through ``exec``): a Ctrl-C
-    at the terminal reaches every process of its group, and this process, not each worker, is
-    the one to stop the run (the workers printed a traceback each). Here a Ctrl-C pressed
-    meanwhile waits until the workers are started, then interrupts as usual: landing while
-    the pool made a worker, it left workers that nobody told to end, and the exit waited for
-    them for ever.
+    A pool starts a worker when a task is submitted and none is idle. The worker keeps the
+    blocked signal for its life (the mask goes through ``exec``): a Ctrl-C at the terminal
+    reaches every process of its group, and this process, not each worker, is the one to stop
+    the run (each worker printed a traceback). And an interrupt can no longer land in the
+    middle of starting a worker, which left workers that nobody told to end (the exit waited
+    for them for ever) or raised from deep inside the import of the task's data.
     """
-    main = threading.current_thread() is threading.main_thread()
-    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if main else None
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    # blocked in this thread, for the worker to inherit; held back by the handler too, for a
+    # signal sent to the process is taken by any thread that does not block it
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
-        for _ in range(count):   # a task submitted while no worker is idle starts one
-            pool.submit(_nothing)
+        with _signals.deferred():
+            yield
     finally:
-        if before is not None:
-            signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 class LocalProcesses(Executor):
@@ -216,10 +218,13 @@ class LocalProcesses(Executor):
                                                  initializer=_process_init,
                                                  initargs=(self._token, shared))
                 self._pool_shared = shared
-                _start_workers(self._pool, self.workers)
             pool, token = self._pool, self._token
-            return _ordered(lambda t: pool.submit(_process_call, fn, token, t), tasks, progress,
-                            self.workers)
+
+            def submit(t):
+                with _sigint_held():
+                    return pool.submit(_process_call, fn, token, t)
+
+            return _ordered(submit, tasks, progress, self.workers)
         except BaseException:
             # Ctrl-C, SIGTERM or a failed task: the workers are stopped, not waited for. An
             # interrupt that lands while the pool starts its workers leaves workers that no
@@ -235,6 +240,7 @@ class LocalProcesses(Executor):
         # spawned is not yet in the pool's table)
         procs = set((getattr(pool, "_processes", None) or {}).values())
         procs |= set(multiprocessing.active_children()) - self._children_before
+        manager = getattr(pool, "_executor_manager_thread", None)
         for p in procs:
             p.terminate()
         for p in procs:
@@ -243,10 +249,18 @@ class LocalProcesses(Executor):
                 p.kill()
                 p.join(5)
         pool.shutdown(wait=False, cancel_futures=True)
+        if manager is not None:
+            # the pool's thread sees its workers gone and ends; joined here, it is not woken
+            # again at exit through a pipe it has closed ("Bad file descriptor")
+            manager.join(10)
 
     def close(self) -> None:
         if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+            try:
+                self._pool.shutdown(wait=True, cancel_futures=True)
+            except BaseException:   # interrupted while the workers end: they are stopped
+                self._stop_workers()
+                raise
             self._pool = None
             self._pool_shared = None
 

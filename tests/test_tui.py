@@ -320,6 +320,31 @@ def test_a_folder_lists_no_map_a_merge_wrote_there(tmp_path):
     assert [p.name for p in find_maps(tmp_path)] == ["robot_a.yaml", "robot_b.yaml", "x.group1.yaml"]
 
 
+async def test_a_dimmed_key_says_why_it_does_nothing(in_root):
+    """e before any merge, r while one runs: the footer dims them, and pressing one did nothing
+    at all (the messages written for these cases could never show)."""
+    app = make_app(["run"])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        await pilot.press("e")
+        await pilot.pause()
+        assert not isinstance(app.screen, ExportScreen)
+        assert any("nothing to export yet" in n.message for n in app._notifications)
+        for k, v in {"iterations": "100000", "particles": "4000"}.items():
+            await type_setting(pilot, k, v)
+        await pilot.press("ctrl+r")
+        await until(pilot, lambda: app.main.merging)
+        app.set_focus(None)                      # no text field: r and e are commands
+        await pilot.press("r")
+        await pilot.press("e")
+        await pilot.pause()
+        messages = [n.message for n in app._notifications]
+        assert any("a merge is running" in m for m in messages), messages
+        assert any("wait for the merge to finish" in m for m in messages), messages
+        await pilot.press("escape")
+        await until(pilot, lambda: not app.main.merging)
+
+
 async def test_cancel_stops_the_merge_and_the_app_stays_usable(in_root):
     app = make_app(["run"])
     async with app.run_test(size=(80, 24)) as pilot:

@@ -131,6 +131,17 @@ class MainScreen(Screen):
             return True if self.result is not None and not self.merging else None
         return True
 
+    def on_key(self, event) -> None:
+        # a key the footer shows dimmed does not run its action: say why instead of nothing
+        if self._typing():
+            return
+        if event.key == "e" and self.check_action("export", ()) is None:
+            event.stop()
+            self.action_export()
+        elif event.key in ("r", "ctrl+r") and self.merging:
+            event.stop()
+            self.action_run()
+
     def on_descendant_focus(self, event) -> None:
         self.refresh_bindings()
 
