@@ -378,6 +378,13 @@ async def test_the_consensus_method_runs_from_the_settings(in_root):
         assert screen.query_one("#method", Select).value == "spectral-pso"   # its swarm is shown
         screen.query_one("#method", Select).value = "consensus"
         await pilot.pause()
+        # the form says what the method is and dims the settings it does not read (it once
+        # still read "default spectral-pso: the paper's DFT + Pearson + PSO", every field alike)
+        assert "consensus: the library's default" in str(screen.query_one("#hint-method").render())
+        assert screen.query_one("#set-particles").has_class("unused")
+        assert screen.query_one("#seeding").has_class("unused")
+        assert not screen.query_one("#set-max_false_merge").has_class("unused")
+        assert not screen.query_one("#set-seed").has_class("unused")
         await run_merge(pilot, {})
         result = screen.result
         assert result is not None and result.config.method == "consensus"

@@ -60,6 +60,34 @@ class Setting:
 TUI_METHOD = "spectral-pso"
 
 
+#: What each method is, in one line of the form
+_METHOD_HINTS = {
+    "spectral-pso": "the paper's DFT + Pearson + PSO; the Run tab plots its swarm",
+    "consensus": "the library's default: placements from scans and walls, each verified on the "
+                 "whole maps, refused when unsure; reads merge risk and seed",
+    "map-merge": "a classic peer: ORB features and RANSAC, as multirobot_map_merge",
+    "map-merge-shipped": "a classic peer: multirobot_map_merge as shipped",
+    "hough-spectrum": "a classic peer: the rotation from the walls' Hough spectra",
+    "fourier-mellin": "a classic peer: phase correlation of the maps' spectra",
+}
+
+
+def method_hint(method: str) -> str:
+    """The form's line about ``method`` (its default marked)."""
+    text = _METHOD_HINTS.get(method, "")
+    return f"default {TUI_METHOD}; {method}: {text}" if method != TUI_METHOD else \
+        f"default {TUI_METHOD}: {text}"
+
+
+def used_settings(method: str) -> set[str]:
+    """The keys of the settings ``method`` reads (the others are dimmed in the form)."""
+    if method == "spectral-pso":
+        return {s.key for s in SETTINGS if s.help.startswith("spectral-pso")} | {"seed", "seeding"}
+    if method == "consensus":
+        return {"max_false_merge", "seed"}
+    return {"max_false_merge", "seed"}   # the peers' confidence is the consensus test's
+
+
 def _settings() -> tuple[Setting, ...]:
     d = MergeConfig()
     p = d.pso
@@ -177,6 +205,9 @@ class SettingsForm(VerticalScroll, can_focus=True):
     SettingsForm Checkbox {
         width: 100%;
     }
+    SettingsForm .unused {
+        opacity: 45%;
+    }
     SettingsForm .hint {
         color: $text-muted;
         width: 100%;
@@ -200,19 +231,30 @@ class SettingsForm(VerticalScroll, can_focus=True):
             yield Label("method")
             yield Select([(m, m) for m in METHODS], value=TUI_METHOD, allow_blank=False,
                          compact=True, id="method")
-            yield Static(f"default {TUI_METHOD}: the paper's DFT + Pearson + PSO",
-                         classes="hint")
+            yield Static(method_hint(TUI_METHOD), id="hint-method", classes="hint")
             for s in SETTINGS:
-                yield Label(s.label)
+                yield Label(s.label, id=f"label-{s.key}")
                 yield Input(_default_text(s), id=f"set-{s.key}", compact=True, valid_empty=s.optional,
                             validators=[_SettingValidator(s)], select_on_focus=False)
                 default = "blank" if s.default is None else _default_text(s)
                 yield Static(f"default {default}: {s.help}", id=f"hint-{s.key}", classes="hint")
-            yield Label("seeding")
+            yield Label("seeding", id="label-seeding")
             yield Checkbox("on", MergeConfig().alignment.seeded, id="seeding", compact=True)
             yield Static("default on: spectral-pso starts the swarm also at the transforms of "
-                         "matched scans; off: the paper's blind search", classes="hint")
+                         "matched scans; off: the paper's blind search", id="hint-seeding",
+                         classes="hint")
         yield Static(_NOTE, id="settings-note")
+
+    @on(Select.Changed, "#method")
+    def _on_method(self, event: Select.Changed) -> None:
+        """The method's own words, and the settings it does not read dimmed."""
+        method = str(event.value)
+        self.query_one("#hint-method", Static).update(method_hint(method))
+        used = used_settings(method)
+        for key in [s.key for s in SETTINGS] + ["seeding"]:
+            field = "#seeding" if key == "seeding" else f"#set-{key}"
+            for part in (f"#label-{key}", field, f"#hint-{key}"):
+                self.query_one(part).set_class(key not in used, "unused")
 
     def on_descendant_focus(self, event) -> None:
         self._describe(event.widget)
