@@ -130,5 +130,5 @@ class OccupancyGrid:
 
     def __repr__(self) -> str:
         n = f"{self.name!r}, " if self.name else ""
-        return (f"OccupancyGrid({n}{self.rows}x{self.cols} cells, {self.resolution:g} m/cell, "
+        return (f"OccupancyGrid({n}{self.cols}x{self.rows} cells (width x height), {self.resolution:g} m/cell, "
                 f"origin=({self.origin[0]:g}, {self.origin[1]:g}, {self.origin[2]:g}))")

@@ -91,13 +91,13 @@ def plot_divergence(ax, unique, *, window=None, title: str | None = None):
     ok = np.isfinite(score)
     ax.plot(idx[ok], score[ok], "-", color="tab:blue", lw=1.0,
             label="section score: 2nd smallest divergence in the section")
-    ax.axhline(unique.delta, color="tab:red", ls="--", lw=1.2, label=f"delta = {unique.delta:.0f} m")
+    ax.axhline(unique.delta, color="tab:red", ls="--", lw=1.2, label=f"delta = {unique.delta:.0f} m x beams")
     sel = unique.indices[(unique.indices >= a) & (unique.indices < b)]
     ax.plot(sel, unique.section_score[sel], "o", color="tab:red", ms=3,
             label=f"unique poses ({sel.size} here, {unique.count} in all)")
     ax.set_xlim(a, b - 1)
     ax.set_xlabel("pose index along the trajectory")
-    ax.set_ylabel("divergence (m)")
+    ax.set_ylabel("divergence (m x beams)")
     ax.set_title(title if title is not None else
                  f"Algorithm 1: a pose is unique when at most 1 scan of its section is within "
                  f"delta (sub_sec = {unique.sub_sec})")

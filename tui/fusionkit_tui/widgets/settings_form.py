@@ -65,7 +65,8 @@ _METHOD_HINTS = {
     "spectral-pso": "the paper's DFT + Pearson + PSO; the Run tab plots its swarm",
     "consensus": "the library's default: placements from scans and walls, each verified on the "
                  "whole maps, refused when unsure; reads merge risk and seed",
-    "map-merge": "a classic peer: ORB features and RANSAC, as multirobot_map_merge",
+    "map-merge": "a classic peer: AKAZE features and RANSAC, as multirobot_map_merge (its "
+                 "chaining corrected)",
     "map-merge-shipped": "a classic peer: multirobot_map_merge as shipped",
     "hough-spectrum": "a classic peer: the rotation from the walls' Hough spectra",
     "fourier-mellin": "a classic peer: phase correlation of the maps' spectra",
