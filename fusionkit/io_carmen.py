@@ -166,7 +166,8 @@ def check_outputs(paths, inputs, *, overwrite: bool) -> None:
         existing = [str(p) for p in paths if Path(p).exists()]
         if existing:
             more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
-            raise InputError(f"{existing[0]}{more} already exists; choose another output "
+            raise InputError(f"{existing[0]}{more} already exist{'s' if not more else ''}; "
+                             f"choose another output "
                              f"directory or allow overwriting (--force)")
 
 

@@ -247,8 +247,11 @@ class _Bag:
 
 
 def _msg(exc) -> str:
-    text = " ".join(str(a) for a in exc.args) if exc.args else type(exc).__name__
-    return text.splitlines()[0] if text else type(exc).__name__
+    # a decode error's args hold the bytes it could not read: its own words say enough
+    text = (str(exc) if isinstance(exc, UnicodeError) or not exc.args
+            else " ".join(str(a) for a in exc.args))
+    text = text.splitlines()[0] if text else type(exc).__name__
+    return text if len(text) <= 200 else text[:200] + "..."
 
 
 def _topic_list(topics: Mapping[str, str]) -> str:

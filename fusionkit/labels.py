@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 from typing import Sequence
 
-__all__ = ["unique_labels", "clip_left"]
+__all__ = ["unique_labels", "clip_left", "fixed"]
 
 _MAP_SUFFIXES = (".yaml", ".yml")
 
@@ -72,3 +72,9 @@ def clip_left(text: str, width: int) -> str:
     if len(text) <= width:
         return text
     return "…" + text[len(text) - width + 1:]
+
+
+def fixed(value: float, width: int, digits: int) -> str:
+    """``value`` right-aligned in ``width`` characters with ``digits`` decimals, never "-0.0"
+    (a value that rounds to zero prints as 0)."""
+    return f"{round(float(value), digits) + 0.0:{width}.{digits}f}"

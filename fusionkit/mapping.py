@@ -156,7 +156,7 @@ def build_grid(log: ScanLog, config: MappingConfig = MappingConfig(), *, name: s
     if rows * cols > MAX_CELLS:
         raise InputError(
             f"the scans span {cols * res:.0f} x {rows * res:.0f} m, {rows * cols} cells at {res} m: "
-            f"too large; use a coarser resolution or a shorter max_free_range")
+            f"too large; use a coarser resolution (--resolution)")
     L = _integrate(log.poses, ranges, log.beam_angles.astype(np.float64), float(log.range_max),
                    float(free_range), float(x0), float(y0), float(res), rows, cols,
                    float(config.l_occ), float(config.l_free), float(config.l_clamp))

@@ -221,3 +221,11 @@ def test_a_new_run_into_a_folder_takes_the_merges_of_the_old_robots_with_them(tm
     assert sorted(p.name for p in run.iterdir()) == [
         "notes.json", "robot_1.pgm", "robot_1.scans.npz", "robot_1.yaml", "robot_2.pgm",
         "robot_2.scans.npz", "robot_2.yaml", "truth.json", "world.pgm", "world.yaml"]
+
+
+def test_a_number_that_rounds_to_zero_prints_as_0_not_minus_0():
+    """evaluate printed "-0.0" for a true heading of -1e-9 rad."""
+    from fusionkit.labels import fixed
+
+    assert fixed(-1e-9, 8, 1) == "     0.0"
+    assert fixed(-0.04, 6, 2) == " -0.04"

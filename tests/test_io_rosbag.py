@@ -96,7 +96,7 @@ def test_import_rosbag_writes_a_robot_log_and_map(run_dir, tmp_path):
     ref = load_map(run_dir / "robot_1.yaml")
     assert grid.resolution == ref.resolution
     assert abs(grid.counts()["occupied"] - ref.counts()["occupied"]) <= 0.05 * ref.counts()["occupied"]
-    with pytest.raises(InputError, match="already exists"):
+    with pytest.raises(InputError, match="r1.yaml and 2 more already exist; "):
         import_rosbag(bag, tmp_path / "out", scan_topic="/robot_1/scan",
                       poses=PoseSource(odom_topic="/robot_1/odom"), name="r1")
 
@@ -404,3 +404,14 @@ def test_cli_export_on_a_full_disk_is_one_line_and_leaves_nothing(run_dir, tmp_p
     assert len(err) == 1 and err[0].startswith("fusionkit export rosbag: error: "), err
     assert "disk is full" in err[0] and "free disk space" in err[0]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_file_of_random_bytes_is_refused_without_echoing_them(tmp_path):
+    """The error line once held the 60 undecodable bytes of the file, escaped."""
+    bag = tmp_path / "rnd.bag"
+    bag.write_bytes(np.random.default_rng(0).integers(0, 256, 4000, dtype=np.uint8).tobytes())
+    with pytest.raises(InputError) as info:
+        import_rosbag(bag, tmp_path / "out", scan_topic="/scan",
+                      poses=PoseSource(odom_topic="/odom"))
+    assert "not a readable ROS bag" in str(info.value)
+    assert "\\x" not in str(info.value) and len(str(info.value)) < 300

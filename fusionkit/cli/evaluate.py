@@ -20,7 +20,7 @@ from pathlib import Path
 from .._atomic import show
 from .._inputs import read_json
 from ..errors import InputError
-from ..labels import clip_left
+from ..labels import clip_left, fixed
 from ..transform import Transform2D
 
 __all__ = ["register", "run", "Truth", "read_truth", "robot_of", "find_report", "read_report", "evaluate_files"]
@@ -404,12 +404,13 @@ def format_evaluation(result: dict) -> str:
     for k, r in enumerate(result["maps"]):
         t, tt, e = r["transform"], r["true_transform"], r["error"]
         conf = f"{r['confidence']:5.2f}" if r["confidence"] is not None else f"{'-':>5}"
-        est = (f"{t['x']:8.2f} {t['y']:8.2f} {math.degrees(t['theta']):8.1f}" if t is not None
-               else f"{'-':>8} {'-':>8} {'-':>8}")
+        est = (f"{fixed(t['x'], 8, 2)} {fixed(t['y'], 8, 2)} {fixed(math.degrees(t['theta']), 8, 1)}"
+               if t is not None else f"{'-':>8} {'-':>8} {'-':>8}")
         err = (f"{e['translation_m']:8.3f} {e['translation_cells']:6.1f} {e['rotation_deg']:6.2f}"
                if e is not None else f"{'-':>8} {'-':>6} {'-':>6}")
         lines.append(f"  {labels[k]:<24} {'yes' if r['merged'] else 'no':<6} {conf} {est} "
-                     f"{tt['x']:8.2f} {tt['y']:8.2f} {math.degrees(tt['theta']):8.1f} {err}")
+                     f"{fixed(tt['x'], 8, 2)} {fixed(tt['y'], 8, 2)} "
+                     f"{fixed(math.degrees(tt['theta']), 8, 1)} {err}")
     return "\n".join(lines)
 
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from .._atomic import check_distinct, check_not_input, check_writable, show
 from ..errors import InputError
-from ..labels import clip_left
+from ..labels import clip_left, fixed
 from ._common import Progress, add_merge_options, int_range, merge_config_from_args
 from ._executor import add_executor_options, executor_from_args
 
@@ -193,8 +193,8 @@ def format_placements(result, names) -> str:
             lines.append(f"{name:<28} {'no':<7} {p.confidence:5.2f} {'-':>8} {'-':>8} {'-':>11}  {p.reason}")
         else:
             t = p.transform
-            lines.append(f"{name:<28} {'yes':<7} {p.confidence:5.2f} {t.x:8.2f} {t.y:8.2f} "
-                         f"{math.degrees(t.theta):11.1f}")
+            lines.append(f"{name:<28} {'yes':<7} {p.confidence:5.2f} {fixed(t.x, 8, 2)} "
+                         f"{fixed(t.y, 8, 2)} {fixed(math.degrees(t.theta), 11, 1)}")
     order = ", ".join(f"{names[a]} + {names[b]}" for a, b in result.fusion_order) or "(none)"
     lines.append(f"fusion order: {order}")
     lines.append(f"method: {result.config.method}; time: "
