@@ -231,6 +231,7 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
     hide = {os.path.realpath(p) for p in hide_first}
     token = secrets.token_hex(6)
     staged: list[Path] = []
+    writing = commit_path   # the file being staged, named when the disk fills mid-write
     try:
         with _locked(_parent(p) for p in targets):
             _recover(commit_path, targets)
@@ -242,7 +243,9 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
                         continue
                     tmp = _parent(p) / f".{p.name}.{token}{_TMP}"
                     staged.append(tmp)
+                    writing = p
                     _write_durable(tmp, payload)
+                writing = commit_path
                 with _signals.deferred():
                     _commit(items, commit_path, commit_payload, staged, hide, token)
             finally:
@@ -251,7 +254,7 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
                         with contextlib.suppress(OSError):
                             tmp.unlink()
     except OSError as exc:
-        failed = Path(exc.filename) if getattr(exc, "filename", None) else commit_path
+        failed = Path(exc.filename) if getattr(exc, "filename", None) else writing
         for t in targets:  # name the target, not its temporary file
             if failed.name.startswith(f".{t.name}."):
                 failed = t

@@ -498,3 +498,21 @@ def test_a_run_killed_while_written_is_finished_or_undone_by_the_next_write(tmp_
         assert now in (before, new), f"killed at rename {k}: {sorted(now)}"
         write_run(new_sim, out)
         assert {p.name: p.read_bytes() for p in out.iterdir()} == new, f"killed at rename {k}"
+
+
+def test_a_full_disk_is_said_of_the_file_that_did_not_fit(tmp_path, monkeypatch):
+    """The disk filling while an image was written was reported as the report (the set's last
+    file) failing: "merged.report.json: cannot be written (No space left on device)"."""
+    real = _atomic._write_durable
+
+    def full(path, payload):
+        if path.name.startswith(".merged.group1.pgm."):
+            raise OSError(28, "No space left on device")
+        return real(path, payload)
+
+    monkeypatch.setattr(_atomic, "_write_durable", full)
+    with pytest.raises(InputError) as info:
+        _write(tmp_path, NEW, "new")
+    assert str(info.value).startswith(str(tmp_path / "merged.group1.pgm"))
+    assert "No space left on device" in str(info.value)
+    assert list(tmp_path.iterdir()) == []
