@@ -414,9 +414,11 @@ def test_a_failed_write_takes_back_the_folders_it_made(tmp_path, monkeypatch, ca
     def failing(*a, **k):
         raise fault
 
-    monkeypatch.setattr(_atomic, "write_set", failing)
+    # imported before write_set is patched: imported after, they would bind the patched one
+    # and monkeypatch would "restore" it for the tests that follow
     import fusionkit.io_carmen as io_carmen
     import fusionkit.sim_output as sim_output
+    monkeypatch.setattr(_atomic, "write_set", failing)
     monkeypatch.setattr(sim_output, "write_set", failing)
     monkeypatch.setattr(io_carmen, "write_set", failing)
     (tmp_path / "have").mkdir()
