@@ -265,6 +265,18 @@ class LocalProcesses(Executor):
             self._pool_shared = None
 
 
+def _answers(url: str, timeout: float = 2.0) -> bool:
+    """Whether ``url`` answers an HTTP GET with a page (not 404)."""
+    import urllib.error
+    import urllib.request
+
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as r:   # noqa: S310 - the user's scheduler
+            return 200 <= r.status < 400
+    except (urllib.error.URLError, OSError, ValueError):
+        return False
+
+
 class _NotCancelled(logging.Filter):
     """Drops a Dask worker's warning that a task ended cancelled: a run stopped by Ctrl-C
     cancels the tasks in flight on purpose, and its one line says so."""
@@ -377,7 +389,12 @@ class DaskExecutor(Executor):
             return None
         if "dashboard" not in self._client.scheduler_info().get("services", {}):
             return None                                   # bokeh is not installed there
-        return self._client.dashboard_link or None
+        link = self._client.dashboard_link or None
+        if link is not None and self._cluster is None and not _answers(link):
+            # a scheduler started elsewhere serves its HTTP port without the dashboard
+            # pages when bokeh is missing or --no-dashboard was given
+            return None
+        return link
 
     def describe(self) -> str:
         where = self._client.scheduler.address if self._client is not None else "closed"

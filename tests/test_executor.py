@@ -9,6 +9,7 @@ import contextlib
 import io
 import signal
 import socket
+import sys
 import time
 
 import numpy as np
@@ -273,3 +274,36 @@ def test_ctrl_c_at_the_terminal_stops_a_dask_run_with_one_line(tmp_path):
         proc.wait(timeout=30)
     assert rest.strip().splitlines() == ["fusionkit bench: interrupted; no output was left half-written"], rest
     assert not left, "a process of the run outlived it by 10 s"
+
+
+def test_a_scheduler_without_dashboard_pages_is_said_to_have_none(tmp_path):
+    """A scheduler started with --no-dashboard (or without bokeh) still serves its HTTP port;
+    the line said "dashboard: http://127.0.0.1:8787/status", a page that answers 404."""
+    import subprocess
+
+    port, http = _free_port(), _free_port()
+    dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+    procs = [subprocess.Popen(dask + ["--host", "127.0.0.1", "--port", str(port), "--no-dashboard",
+                                      "--dashboard-address", f"127.0.0.1:{http}"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path)]
+    try:
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
+             "--host", "127.0.0.1", "--nthreads", "1", "--no-dashboard"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path))
+        with deadline(120):
+            ex = DaskExecutor(address=f"tcp://127.0.0.1:{port}", timeout=60)
+            try:
+                assert ex.dashboard is None
+                assert ex.describe().endswith("dashboard: none (install bokeh for one)")
+            finally:
+                ex.close()
+    finally:
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(10)
