@@ -134,6 +134,11 @@ def recover_set(commit: os.PathLike | str, leftovers) -> None:
                     os.unlink(folder / entry)
 
 
+#: The commit file of every set this process wrote whole, in order (a command interrupted
+#: after its last write says so)
+COMMITTED: list[Path] = []
+
+
 def _journal_path(commit: Path) -> Path:
     return _parent(commit) / f".{commit.name}{_JOURNAL}"
 
@@ -248,6 +253,7 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
                 writing = commit_path
                 with _signals.deferred():
                     _commit(items, commit_path, commit_payload, staged, hide, token)
+                    COMMITTED.append(commit_path)   # before a held-back signal is delivered
             finally:
                 for tmp in staged:
                     if tmp is not None:

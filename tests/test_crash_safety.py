@@ -518,3 +518,30 @@ def test_a_full_disk_is_said_of_the_file_that_did_not_fit(tmp_path, monkeypatch)
     assert str(info.value).startswith(str(tmp_path / "merged.group1.pgm"))
     assert "No space left on device" in str(info.value)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_interrupt_after_the_outputs_were_written_says_they_are_new(tmp_path, monkeypatch, capsys):
+    """Ctrl-C while merge printed its table, after its set was committed: exit 130 with "no
+    output was left half-written", and a script could not tell that the new set was in place."""
+    from fusionkit.cli import main
+    from fusionkit.cli import merge as merge_cli
+
+    for name, g in (("a", _grid(1, (30, 40))), ("b", _grid(1, (30, 40)))):
+        save_map(g, tmp_path / f"{name}.yaml")
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(merge_cli, "format_placements", interrupted)
+    code = main(["merge", str(tmp_path / "a.yaml"), str(tmp_path / "b.yaml"), "-o",
+                 str(tmp_path / "m.yaml"), "--method", "fourier-mellin"])
+    assert code == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"fusionkit merge: interrupted after writing {tmp_path / 'm.report.json'} (its set "
+                   f"of outputs is whole and new); nothing was left half-written"], err
+    assert (tmp_path / "m.report.json").is_file()
+    # the next command of the same process starts with nothing written
+    monkeypatch.setattr(merge_cli, "merge_config_from_args", interrupted)
+    assert main(["merge", str(tmp_path / "a.yaml"), str(tmp_path / "b.yaml"), "-o",
+                 str(tmp_path / "n.yaml")]) == 130
+    assert capsys.readouterr().err.strip() == "fusionkit merge: interrupted; no output was left half-written"

@@ -130,6 +130,9 @@ def main(argv=None) -> int:
     command leaves its outputs as they were before it started.
     """
     command = "fusionkit"
+    atomic = sys.modules.get("fusionkit._atomic")
+    if atomic is not None:   # what an earlier command of this process wrote is not ours
+        atomic.COMMITTED.clear()
     try:
         _signals.install()
         argv = sys.argv[1:] if argv is None else list(argv)
@@ -148,8 +151,15 @@ def main(argv=None) -> int:
             # up, they end as they do once running, with exit 0
             return 0
         term = isinstance(exc, _signals.Terminated)
-        _say(f"{command}: {'terminated' if term else 'interrupted'}; no output was left "
-             f"half-written")
+        atomic = sys.modules.get("fusionkit._atomic")
+        written = list(atomic.COMMITTED) if atomic is not None else []
+        if written:   # the signal came after a set of outputs was committed: that one is new
+            _say(f"{command}: {'terminated' if term else 'interrupted'} after writing "
+                 f"{_one_line(written[-1])} (its set of outputs is whole and new); nothing "
+                 f"was left half-written")
+        else:
+            _say(f"{command}: {'terminated' if term else 'interrupted'}; no output was left "
+                 f"half-written")
         return _signals.EXIT_SIGTERM if term else _signals.EXIT_SIGINT
     except FusionkitError as exc:
         _say(f"{command}: error: {_one_line(exc)}")
