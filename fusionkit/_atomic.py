@@ -252,8 +252,8 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
                     _write_durable(tmp, payload)
                 writing = commit_path
                 with _signals.deferred():
-                    _commit(items, commit_path, commit_payload, staged, hide, token)
-                    COMMITTED.append(commit_path)   # before a held-back signal is delivered
+                    if _commit(items, commit_path, commit_payload, staged, hide, token):
+                        COMMITTED.append(commit_path)   # before a held-back signal comes
             finally:
                 for tmp in staged:
                     if tmp is not None:
@@ -267,7 +267,9 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
         raise _write_error(failed, exc) from None
 
 
-def _commit(items, commit_path: Path, commit_payload: bytes, staged, hide, token) -> None:
+def _commit(items, commit_path: Path, commit_payload: bytes, staged, hide, token) -> bool:
+    """Put the staged set in place; True once committed, False when a held-back signal
+    rolled it back."""
     entries = []
     for p, _ in items + [(commit_path, None)]:
         existed = os.path.lexists(p)
@@ -310,15 +312,20 @@ def _commit(items, commit_path: Path, commit_payload: bytes, staged, hide, token
         for d in dirs:
             _fsync_dir(d)
         if isinstance(exc, _Cancelled):
-            return  # the held-back signal is delivered when the deferred block ends
+            return False  # the held-back signal is delivered when the deferred block ends
         raise
+    # Committed: the new set is in place whatever happens now. A failure to tidy up is no
+    # failure of the write: the next write to this output finds the journal, sees the commit
+    # file is the new one and finishes the tidying.
     _fsync_dir(_parent(commit_path))
-    journal.unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        journal.unlink(missing_ok=True)
     for _, backup, _ in entries:
         if backup is not None:
             with contextlib.suppress(OSError):
                 backup.unlink()
     _fsync_dir(_parent(journal))
+    return True
 
 
 class _Cancelled(Exception):

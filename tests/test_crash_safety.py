@@ -545,3 +545,24 @@ def test_an_interrupt_after_the_outputs_were_written_says_they_are_new(tmp_path,
     assert main(["merge", str(tmp_path / "a.yaml"), str(tmp_path / "b.yaml"), "-o",
                  str(tmp_path / "n.yaml")]) == 130
     assert capsys.readouterr().err.strip() == "fusionkit merge: interrupted; no output was left half-written"
+
+
+def test_a_failure_after_the_commit_is_no_failure_of_the_write(tmp_path, monkeypatch):
+    """The journal's removal failing after the commit point raised "m.report.json: cannot be
+    written (Input/output error)", exit 2, while the new set was whole and in place."""
+    _write(tmp_path, OLD, "old")
+    real = Path.unlink
+
+    def failing(self, missing_ok=False):
+        if self.name.endswith(".journal"):
+            raise OSError(5, "Input/output error")
+        return real(self, missing_ok=missing_ok)
+
+    monkeypatch.setattr(Path, "unlink", failing)
+    _write(tmp_path, NEW, "new")                                # no error: the set is new
+    assert json.loads((tmp_path / "merged.report.json").read_text())["write"] == "new"
+    assert _same(load_map(tmp_path / "merged.yaml"), NEW["merged"])
+    monkeypatch.setattr(Path, "unlink", real)
+    _write(tmp_path, OLD, "old")                                # the next write tidies up
+    assert _state(tmp_path) == "old"
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
