@@ -408,7 +408,8 @@ def test_the_status_is_published_while_the_reference_robot_is_missing(procs, run
     status = _wait(waiting, 90, procs, "a status naming the three robots")
     assert status["reference"] == "/nobody"
     assert not any(r["placed"] for r in status["robots"].values())
-    assert "waiting for the reference robot /nobody's map" in procs.log("node")
+    _wait(lambda: "waiting for the reference robot /nobody's map" in procs.log("node"), 60, procs,
+          "the node to say what it waits for")
     assert procs.stop("play") == 0 and procs.stop("node") == 0
 
 
