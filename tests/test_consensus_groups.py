@@ -123,3 +123,26 @@ def test_the_tui_export_writes_each_groups_map_as_merge_does(two_buildings, tmp_
     assert rep["group_outputs"] == [str(tmp_path / "merged.group1.yaml")]
     fused = load_map(tmp_path / "merged.group1.yaml")
     assert np.array_equal(fused.data, result.groups[0].grid.trinary())
+
+
+async def test_the_tui_result_names_a_maps_group(two_buildings, tmp_path):
+    """The Result tab showed a map of another group as "merged: no" beside its confidence 1.00,
+    as if it had been refused."""
+    from textual.widgets import DataTable, Select
+
+    from fusionkit_tui import make_app
+    from test_tui import ready, run_merge
+
+    one, two = two_buildings
+    paths = []
+    for name, g in (("a", one.a), ("c", two.a), ("b", one.b), ("d", two.b)):
+        save_map(g, tmp_path / f"{name}.yaml")
+        paths.append(str(tmp_path / f"{name}.yaml"))
+    app = make_app(paths)
+    async with app.run_test(size=(120, 40)) as pilot:
+        await ready(pilot)
+        app.main.query_one("#method", Select).value = "consensus"
+        await pilot.pause()
+        await run_merge(pilot, {})
+        table = app.main.query_one("#placements", DataTable)
+        assert [str(table.get_row_at(k)[1]) for k in range(4)] == ["yes", "group 1", "yes", "group 1"]

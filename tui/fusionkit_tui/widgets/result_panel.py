@@ -112,7 +112,9 @@ class ResultPanel(Vertical):
         for p in result.placements:
             name = Text(self._names[p.index], style=robot_colour(p.index) if p.merged else "dim")
             if p.transform is None:
-                row = [name, "no", f"{p.confidence:.2f}", "-", "-", "-"]
+                # a map of another group is placed, in its group's map (exported beside)
+                merged = f"group {p.group}" if p.group else "no"
+                row = [name, merged, f"{p.confidence:.2f}", "-", "-", "-"]
             else:
                 t = p.transform
                 row = [name, "yes", f"{p.confidence:.2f}", f"{t.x:.2f}", f"{t.y:.2f}",
