@@ -391,6 +391,9 @@ async def test_the_consensus_method_runs_from_the_settings(in_root):
         assert result is not None and result.config.method == "consensus"
         assert result.all_merged
         assert "no swarm" in screen.run_panel.plot.note
+        # its own stages, not the paper's method's (it showed "✓ unique poses  ✓ pairing")
+        stages = str(screen.run_panel.query_one("#stages").render())
+        assert "place pairs" in stages and "unique poses" not in stages, stages
         assert screen.query_one("#placements", DataTable).row_count == ROBOTS
 
 

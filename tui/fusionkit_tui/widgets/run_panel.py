@@ -18,19 +18,29 @@ __all__ = ["RunPanel", "overall_fraction"]
 _WEIGHTS = {"scans": 0.10, "unique_poses": 0.20, "pairing": 0.05, "align": 0.60, "fuse": 0.05}
 
 
+#: The stages of the other methods (no scans' spectra, no pairing): the pairs placed, the fusion
+PLACING_STAGES = (("align", "place pairs"), ("fuse", "fuse"))
+
+
+def stages_of(method: str) -> tuple:
+    """The stages a merge with ``method`` goes through, with the words the panel shows."""
+    return STAGES if method == "spectral-pso" else PLACING_STAGES
+
+
 def overall_fraction(stage: str, step: int, total: int, iteration: int | None = None,
-                     iterations: int | None = None) -> float:
-    """How far a merge is, in [0, 1], from a progress event."""
-    names = [s for s, _ in STAGES]
+                     iterations: int | None = None, stages=STAGES) -> float:
+    """How far a merge is, in [0, 1], from a progress event (``stages``: the merge's own)."""
+    names = [s for s, _ in stages]
     if stage == "done":
         return 1.0
     if stage not in names:
         return 0.0
-    done = sum(_WEIGHTS[s] for s in names[: names.index(stage)])
+    scale = sum(_WEIGHTS[s] for s in names)
+    done = sum(_WEIGHTS[s] for s in names[: names.index(stage)]) / scale
     within = step / total if total > 0 else 0.0
     if stage == "align" and iteration is not None and iterations:
         within = (step + min(1.0, iteration / iterations)) / total if total > 0 else 0.0
-    return min(1.0, done + _WEIGHTS[stage] * within)
+    return min(1.0, done + _WEIGHTS[stage] / scale * within)
 
 
 class RunPanel(Vertical):
@@ -70,6 +80,7 @@ class RunPanel(Vertical):
         self._phase = 0
         self._last_iteration = -1
         self._where = (0, 0)
+        self._stage_list = STAGES
 
     def compose(self) -> ComposeResult:
         yield Static("", id="stages")
@@ -88,10 +99,10 @@ class RunPanel(Vertical):
 
     def _stages(self, current: str, step: int = 0, total: int = 0, final: str = "",
                 stopped: bool = False) -> Text:
-        names = [s for s, _ in STAGES]
+        names = [s for s, _ in self._stage_list]
         text = Text()
         idx = names.index(current) if current in names else (len(names) if current == "done" else -1)
-        for k, (name, words) in enumerate(STAGES):
+        for k, (name, words) in enumerate(self._stage_list):
             if k:
                 text.append("  ")
             if k < idx:
@@ -135,11 +146,12 @@ class RunPanel(Vertical):
         (with ``method``: only the paper's method reports its swarms)."""
         self._iterations = iterations
         self._stage, self._step, self._where = "", -1, (0, 0)
+        self._stage_list = stages_of(method)
         self.plot.reset("" if method == "spectral-pso" else
                         f"{method}: no swarm to watch (the paper's method, spectral-pso, has one)")
         self._legend()
         self.query_one(ProgressBar).update(progress=0)
-        self.query_one("#stages", Static).update(self._stages("scans"))
+        self.query_one("#stages", Static).update(self._stages(self._stage_list[0][0]))
         self.query_one("#detail", Static).update(f"merging {maps} maps; escape cancels")
         self.query_one("#left", Static).update("")
 
@@ -150,7 +162,8 @@ class RunPanel(Vertical):
         self.query_one("#stages", Static).update(self._stages(ev.stage, ev.step, ev.total))
         # never backwards: a refinement swarm restarts its iterations within the same step
         bar = self.query_one(ProgressBar)
-        done = 100 * overall_fraction(ev.stage, ev.step, ev.total, ev.iteration, self._iterations)
+        done = 100 * overall_fraction(ev.stage, ev.step, ev.total, ev.iteration, self._iterations,
+                                      self._stage_list)
         bar.update(progress=max(done, bar.progress or 0))
         detail = self.query_one("#detail", Static)
         left = self.query_one("#left", Static)
@@ -174,9 +187,11 @@ class RunPanel(Vertical):
                 detail.update(f"{phase} {ev.label}: iteration {ev.iteration} of at most "
                               f"{self._iterations}, best cost {ev.best_cost:.5g}")
             else:
-                detail.update(f"aligning {ev.label}")
+                detail.update(f"{'aligning' if self._stage_list is STAGES else 'placing'} "
+                              f"{ev.label}")
             after = ev.total - ev.step - 1
-            left.update(f"alignment {ev.step + 1} of {ev.total}; "
+            what = "alignment" if self._stage_list is STAGES else "pair"
+            left.update(f"{what} {ev.step + 1} of {ev.total}; "
                         f"{after} more after this, then fusion")
         else:
             what = {"scans": "reading scans", "unique_poses": "finding unique poses (Algorithm 1)",
@@ -195,7 +210,8 @@ class RunPanel(Vertical):
 
     def stopped(self, why: str) -> None:
         """The merge was cancelled or failed: say so, keep the plot as it was."""
-        self.query_one("#stages", Static).update(self._stages(self._stage or "scans", *self._where,
+        self.query_one("#stages", Static).update(self._stages(self._stage or self._stage_list[0][0],
+                                                              *self._where,
                                                               stopped=True))
         self.query_one("#detail", Static).update(Text(why, style="bold"))
         self.query_one("#left", Static).update("press r to run again")
