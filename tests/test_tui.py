@@ -394,6 +394,7 @@ async def test_the_consensus_method_runs_from_the_settings(in_root):
         # its own stages, not the paper's method's (it showed "✓ unique poses  ✓ pairing")
         stages = str(screen.run_panel.query_one("#stages").render())
         assert "place pairs" in stages and "unique poses" not in stages, stages
+        assert screen.run_panel.plot.series == []              # no swarm, no legend of pairs
         assert screen.query_one("#placements", DataTable).row_count == ROBOTS
 
 

@@ -170,9 +170,10 @@ class RunPanel(Vertical):
         if ev.stage == "align":
             colour = robot_colour(ev.pair[1]) if ev.pair else None
             if self._stage != "align" or ev.step != self._step:
-                self.plot.start(ev.label, colour)
+                if self._stage_list is STAGES:   # a swarm to plot: only the paper's method
+                    self.plot.start(ev.label, colour)
+                    self._legend()
                 self._step, self._phase, self._last_iteration = ev.step, 0, -1
-                self._legend()
             if ev.iteration is not None:
                 if ev.iteration <= self._last_iteration:
                     # a second swarm of the same alignment (the local refinement): its own line

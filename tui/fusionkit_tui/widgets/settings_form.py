@@ -63,10 +63,8 @@ TUI_METHOD = "spectral-pso"
 #: What each method is, in one line of the form
 _METHOD_HINTS = {
     "spectral-pso": "the paper's DFT + Pearson + PSO; the Run tab plots its swarm",
-    "consensus": "the library's default: placements from scans and walls, each verified on the "
-                 "whole maps, refused when unsure; reads merge risk and seed",
-    "map-merge": "a classic peer: AKAZE features and RANSAC, as multirobot_map_merge (its "
-                 "chaining corrected)",
+    "consensus": "the library's default; verified placements, refused when unsure",
+    "map-merge": "a classic peer: AKAZE features + RANSAC, as multirobot_map_merge",
     "map-merge-shipped": "a classic peer: multirobot_map_merge as shipped",
     "hough-spectrum": "a classic peer: the rotation from the walls' Hough spectra",
     "fourier-mellin": "a classic peer: phase correlation of the maps' spectra",
@@ -75,9 +73,8 @@ _METHOD_HINTS = {
 
 def method_hint(method: str) -> str:
     """The form's line about ``method`` (its default marked)."""
-    text = _METHOD_HINTS.get(method, "")
-    return f"default {TUI_METHOD}; {method}: {text}" if method != TUI_METHOD else \
-        f"default {TUI_METHOD}: {text}"
+    return f"default {TUI_METHOD}: {_METHOD_HINTS[TUI_METHOD]}" if method == TUI_METHOD else \
+        f"{method}: {_METHOD_HINTS.get(method, '')}"
 
 
 def used_settings(method: str) -> set[str]:
