@@ -51,7 +51,8 @@ BAD_PUBLISHER = textwrap.dedent("""
 
 SEQUENCE_PUBLISHER = textwrap.dedent("""
     # python -c SCRIPT ROBOT=MAP@SECONDS ...: publish each MAP (a map YAML, or "unknown" for an
-    # all-unknown 200 x 200 grid) latched on /ROBOT/map, SECONDS after the start, in that order
+    # all-unknown 200 x 200 grid, or "none": the topic only) latched on /ROBOT/map, SECONDS
+    # after the start, in that order
     import sys, time
     import numpy as np
     import rclpy
@@ -68,7 +69,7 @@ SEQUENCE_PUBLISHER = textwrap.dedent("""
         robot, rest = arg.split("=", 1)
         path, at = rest.rsplit("@", 1)
         grid = (fk.OccupancyGrid(np.full((200, 200), -1, np.int8), 0.1, (0.0, 0.0, 0.0), robot)
-                if path == "unknown" else fk.load_map(path))
+                if path == "unknown" else None if path == "none" else fk.load_map(path))
         steps.append((float(at), robot, grid))
     pubs, t0 = {}, time.monotonic()
     try:
@@ -76,6 +77,8 @@ SEQUENCE_PUBLISHER = textwrap.dedent("""
             time.sleep(max(0.0, t0 + at - time.monotonic()))
             if robot not in pubs:
                 pubs[robot] = node.create_publisher(OccupancyGrid, f"/{robot}/map", qos)
+            if grid is None:
+                continue
             msg = OccupancyGrid()
             fill_msg(msg, grid, f"{robot}/map", node.get_clock().now().to_msg())
             pubs[robot].publish(msg)
@@ -423,3 +426,26 @@ def test_a_parameter_the_node_does_not_know_is_said_once_and_ignored(procs):
     log = procs.log("node")
     assert log.count("parameter merging_rte is not one of this node's; ignored") == 1
     assert "use_sim_time" not in log
+
+
+def test_a_reference_robot_whose_map_has_not_come_is_not_said_placed(procs, run3, tmp_path):
+    """The status said the reference robot was placed (confidence 1) while no map of it had
+    arrived, so nothing of it was in the merged map."""
+    probe_out = tmp_path / "probe.jsonl"
+    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
+                          "robot_1", "robot_2"])
+    procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
+                                      "-p", "reference_robot:=/robot_1"])
+    procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER, "robot_1=none@0",
+                        f"robot_2={run3 / 'robot_2.yaml'}@0"])
+
+    def both():
+        sts = [s["status"] for s in _records(probe_out, "status")]
+        return next((s for s in reversed(sts) if {"/robot_1", "/robot_2"} <= set(s["robots"])
+                     and s["robots"]["/robot_2"]["map"]), None)
+
+    status = _wait(both, 90, procs, "a status naming both robots")
+    assert procs.stop("pub") == 0 and procs.stop("node") == 0
+    r1 = status["robots"]["/robot_1"]
+    assert r1["placed"] is False and r1["map"] is None
+    assert r1["reason"] == "no valid map received yet"

@@ -236,11 +236,13 @@ class MergeNode:
             items = list(self.robots.items())
         for name, r in items:
             held = self.tracker.held(name)
+            waiting = r.grid is None   # its place may be known (the reference), its map is not
             robots[name] = {
-                "topic": r.topic, "placed": held is not None,
+                "topic": r.topic, "placed": held is not None and not waiting,
                 "transform": None if held is None else held[0].as_dict(4),
                 "confidence": None if held is None else round(held[1], 4),
-                "last_decision": r.last_action, "reason": r.last_why,
+                "last_decision": r.last_action,
+                "reason": "no valid map received yet" if waiting and not r.problem else r.last_why,
                 "map": None if r.grid is None else {"width": r.grid.cols, "height": r.grid.rows,
                                                     "resolution": r.grid.resolution},
                 "updates": r.updates, "problem": r.problem or None, "vanished": r.vanished}
