@@ -97,9 +97,10 @@ def test_initial_poses_are_not_read_unless_known_init_poses_is_set():
 def test_an_initial_pose_written_nested_is_said_how_to_write_it():
     from fusionkit.ros2._params import unknown_parameter
 
-    assert unknown_parameter("robot_3.map_merge.init_pose_x").endswith(
-        "ignored (an initial pose is written flat, as map_merge's params.yaml does: "
-        "/robot_3/map_merge/init_pose_x: VALUE)")
+    for name in ("robot_3.map_merge.init_pose_x", "/robot_3.map_merge.init_pose_x"):
+        assert unknown_parameter(name).endswith(
+            "ignored (an initial pose is written flat, as map_merge's params.yaml does: "
+            "/robot_3/map_merge/init_pose_x: VALUE)")
     assert unknown_parameter("merging_rte") == ("parameter merging_rte is not one of this node's; "
                                                 "ignored (the parameters: fusionkit ros2 "
                                                 "merge-node --help)")

@@ -51,7 +51,8 @@ BAD_PUBLISHER = textwrap.dedent("""
 
 SEQUENCE_PUBLISHER = textwrap.dedent("""
     # python -c SCRIPT ROBOT=MAP@SECONDS ...: publish each MAP (a map YAML, or "unknown" for an
-    # all-unknown 200 x 200 grid, or "none": the topic only) latched on /ROBOT/map, SECONDS
+    # all-unknown 200 x 200 grid, "free" for an all-free one, or "none": the topic only) latched
+    # on /ROBOT/map, SECONDS
     # after the start, in that order
     import sys, time
     import numpy as np
@@ -68,8 +69,9 @@ SEQUENCE_PUBLISHER = textwrap.dedent("""
     for arg in sys.argv[1:]:
         robot, rest = arg.split("=", 1)
         path, at = rest.rsplit("@", 1)
-        grid = (fk.OccupancyGrid(np.full((200, 200), -1, np.int8), 0.1, (0.0, 0.0, 0.0), robot)
-                if path == "unknown" else None if path == "none" else fk.load_map(path))
+        grid = (fk.OccupancyGrid(np.full((200, 200), -1 if path == "unknown" else 0, np.int8), 0.1,
+                                 (0.0, 0.0, 0.0), robot) if path in ("unknown", "free")
+                else None if path == "none" else fk.load_map(path))
         steps.append((float(at), robot, grid))
     pubs, t0 = {}, time.monotonic()
     try:
@@ -281,10 +283,12 @@ def test_node_merges_a_played_run_holds_transforms_and_survives_bad_input(procs,
         assert "switched" not in node_log
 
 
+@pytest.mark.parametrize("first", ["unknown", "free"])
 def test_an_empty_first_map_is_not_the_reference_and_a_pending_switch_is_decided(procs, run3,
-                                                                               tmp_path):
+                                                                               tmp_path, first):
     """Two ways the node once stood still. A SLAM node's first map is often all unknown: taken
-    as the reference, nothing merged until that robot mapped something. A robot placed from a
+    as the reference (or one of free space without a wall), nothing merged until that robot
+    mapped something. A robot placed from a
     wrong map (here robot_2's, published under robot_3) then sending its own map once kept the
     wrong transform for good: the better estimate needed a second estimation, and maps that stop
     changing were never estimated again."""
@@ -293,7 +297,7 @@ def test_an_empty_first_map_is_not_the_reference_and_a_pending_switch_is_decided
                           "robot_1", "robot_2", "robot_3"])
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
                                       "-p", "estimation_rate:=1.0"])
-    procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER, "robot_1=unknown@0",
+    procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER, f"robot_1={first}@0",
                         f"robot_2={run3 / 'robot_2.yaml'}@2", f"robot_3={run3 / 'robot_2.yaml'}@2",
                         f"robot_1={run3 / 'robot_1.yaml'}@6", f"robot_3={run3 / 'robot_3.yaml'}@10"])
     truth = {r["name"]: fk.Transform2D.from_dict(r["transform"])

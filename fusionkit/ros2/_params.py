@@ -166,6 +166,6 @@ def unknown_parameter(name: str) -> str:
     if m:
         return (f"parameter {name} is not one of this node's; ignored (an initial pose is "
                 f"written flat, as map_merge's params.yaml does: "
-                f"/{m['robot'].replace('.', '/')}/map_merge/init_pose_{m['axis']}: VALUE)")
+                f"/{m['robot'].lstrip('/').replace('.', '/')}/map_merge/init_pose_{m['axis']}: VALUE)")
     return (f"parameter {name} is not one of this node's; ignored (the parameters: fusionkit "
             f"ros2 merge-node --help)")

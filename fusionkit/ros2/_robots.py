@@ -22,6 +22,7 @@ class Robot:
     received: float = 0.0
     updates: int = 0
     known: bool = False          # its last map holds a known cell (an empty one is waited out)
+    walls: bool = False          # ... and an occupied one (a reference needs walls)
     problem: str = ""
     vanished: bool = False
     last_action: str = ""

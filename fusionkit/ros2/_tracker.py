@@ -149,8 +149,8 @@ class Tracker:
             self._pending.pop(robot, None)
             self._held[robot] = _Held(estimate, confidence)
             return Decision(robot, "refined", estimate, confidence,
-                            f"the same placement fixed better: scores {s_new:.2f} against "
-                            f"{s_old:.2f} on the current maps")
+                            f"the same placement fixed better: scores {s_new:.4f} against "
+                            f"{s_old:.4f} on the current maps")
         if s_new is None or s_new < s_old + self.switch_margin:
             self._pending.pop(robot, None)
             why = ("a different estimate was found" if s_new is None else

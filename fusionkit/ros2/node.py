@@ -194,8 +194,11 @@ class MergeNode:
         if r.problem:
             self.log.info(f"{r.name}: valid map again")
         known = bool(grid.known_mask().any())
+        walls = known and bool(grid.occupied_mask().any())
         with self._lock:
-            if self.reference is None and not self.s.known_init_poses and known:
+            # the first map with a wall: an empty or wall-less map (a SLAM node's first) gives
+            # nothing to place the others by
+            if self.reference is None and not self.s.known_init_poses and walls:
                 # the first robot with a valid map: its map frame is the merged frame
                 self.reference = r.name
                 self.tracker.fix(r.name, _identity())
@@ -203,7 +206,7 @@ class MergeNode:
                 self.log.info(f"{r.name}: reference robot (its map frame is the merged frame)")
                 self._publish_pose(r)
             r.problem = ""
-            r.known = known
+            r.known, r.walls = known, walls
             r.grid = grid
             r.received = time.monotonic()
             r.updates += 1
@@ -316,6 +319,15 @@ class MergeNode:
                 snapshot = [(n, r.grid) for n, r in self.robots.items() if r.grid is not None]
             # a switch waiting for its confirmations is estimated again on unchanged maps: a
             # robot whose map stopped growing must not keep a transform found worse
+            ref_robot = self.robots.get(ref) if ref is not None else None
+            if ref_robot is not None and ref_robot.grid is not None and not ref_robot.walls:
+                # a named reference whose map holds no wall yet: nothing can be placed by it
+                self._once(("nowall", ref), f"waiting for the reference robot {ref}'s map "
+                           f"to show a wall (reference_robot)", "info")
+                if version != done:
+                    self._publish_status()
+                    done = version
+                continue
             if (version == done and not self.tracker.pending()) or ref not in dict(snapshot) \
                     or len(snapshot) < 2:
                 if ref is not None and snapshot and ref not in dict(snapshot):
