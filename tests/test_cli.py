@@ -229,3 +229,18 @@ def test_a_number_that_rounds_to_zero_prints_as_0_not_minus_0():
 
     assert fixed(-1e-9, 8, 1) == "     0.0"
     assert fixed(-0.04, 6, 2) == " -0.04"
+
+
+def test_a_finished_command_is_not_killed_by_a_late_ctrl_c(monkeypatch, capsys):
+    """Python gives SIGINT its default action back as it shuts down: a Ctrl-C in that 0.1 s
+    killed a merge that had written its files and printed its table (exit -2, no word)."""
+    import signal
+
+    monkeypatch.setattr(sys, "argv", ["fusionkit", "--version"])
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit):
+            main()
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, before)

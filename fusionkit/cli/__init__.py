@@ -129,6 +129,17 @@ def main(argv=None) -> int:
     traceback), 130 interrupted by SIGINT (Ctrl-C), 143 stopped by SIGTERM. An interrupted
     command leaves its outputs as they were before it started.
     """
+    if argv is None:   # the program itself: once its command is done, a Ctrl-C is too late
+        try:
+            return _main(None)
+        finally:
+            # Python restores SIGINT's default action as it shuts down: a Ctrl-C in the
+            # 0.1 s that takes killed a command that had finished, with no word
+            _quiet_signals()
+    return _main(argv)
+
+
+def _main(argv) -> int:
     command = "fusionkit"
     atomic = sys.modules.get("fusionkit._atomic")
     if atomic is not None:   # what an earlier command of this process wrote is not ours
