@@ -216,8 +216,9 @@ def test_a_new_run_into_a_folder_takes_the_merges_of_the_old_robots_with_them(tm
     main(["merge", *robots, "-o", str(run / "merged.yaml"), "--quiet"])
     main(["merge", *robots, "-o", str(run / "m2.yaml"), "--report", str(run / "r.json"), "--quiet"])
     (run / "notes.json").write_text('{"mine": true}')
-    assert main(["simulate", "--robots", "2", "--poses", "40", "--seed", "5", "--out", str(run),
-                 "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["simulate", "--robots", "2", "--poses", "40", "--seed", "5", "--out", str(run)]) == 0
+    assert "removed the earlier robots' merges: merged.yaml, m2.yaml" in capsys.readouterr().out
     assert sorted(p.name for p in run.iterdir()) == [
         "notes.json", "robot_1.pgm", "robot_1.scans.npz", "robot_1.yaml", "robot_2.pgm",
         "robot_2.scans.npz", "robot_2.yaml", "truth.json", "world.pgm", "world.yaml"]

@@ -305,6 +305,21 @@ async def test_export_never_replaces_the_ground_truth_of_the_run(in_root):
     assert not (in_root / "run" / "world.report.json").exists()
 
 
+def test_a_run_folder_selects_its_robots_whatever_else_stands_there(in_root, tmp_path):
+    """A merge written into a run's folder with its report elsewhere was selected, as the
+    reference, beside the robots it was made of."""
+    import shutil
+
+    from fusionkit_tui.runner import find_maps
+
+    run = tmp_path / "r4"
+    shutil.copytree(in_root / "run", run)
+    main(["merge", str(run / "robot_1.yaml"), str(run / "robot_2.yaml"), "-o", str(run / "fused.yaml"),
+          "--report", str(tmp_path / "r4.json"), "--quiet", "--method", "hough-spectrum"])
+    assert (run / "fused.yaml").is_file()
+    assert [p.name for p in find_maps(run)] == [f"robot_{k}.yaml" for k in range(1, ROBOTS + 1)]
+
+
 def test_a_folder_lists_no_map_a_merge_wrote_there(tmp_path):
     """Maps a merge wrote are not robot maps: the output a report names, whatever the report's
     own name (``merge --report r.json``), and the group maps beside it."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 from ._common import Progress, float_range, int_range
 
@@ -111,11 +112,16 @@ def run(args) -> int:
     progress = Progress("simulating", enabled=None if not args.quiet else False)
     sim = simulate(world, config, progress=progress)
     progress.close()
+    from ..sim_output import merges_of_run
+
+    old_merges = [p for p in merges_of_run(Path(args.out)) if p.suffix in (".yaml", ".yml")]
     truth = write_run(sim, args.out, world_path=args.world)
     seconds = time.perf_counter() - t0
     if not args.quiet:
         print(format_summary(sim, source))
         print(f"wrote {len(sim.robots)} robot maps, scans and {truth} in {seconds:.1f} s")
+        if old_merges:
+            print(f"removed the earlier robots' merges: {', '.join(p.name for p in old_merges)}")
     return 0
 
 

@@ -53,7 +53,8 @@ def find_maps(directory) -> list[Path]:
     inputs to a merge: a merged map (a ``<stem>.report.json`` stands beside it, or a merge
     report in the directory names it as its output), a group map of a merge
     (``NAME.group1.yaml`` of such a map) and the ground-truth world that a ``truth.json`` in
-    the directory names.
+    the directory names. A run's folder (a ``truth.json`` naming robots) gives its robots'
+    maps only.
 
     Parameters
     ----------
@@ -86,7 +87,23 @@ def find_maps(directory) -> list[Path]:
         if world is not None and p.resolve() == world:
             continue
         out.append(p)
+    robots = _run_robots(directory)
+    if robots:   # a run's folder: its robots, whatever else was written there since
+        out = [p for p in out if p.resolve() in robots]
     return out
+
+
+def _run_robots(directory: Path) -> set:
+    """The robot maps a ``truth.json`` in ``directory`` names (resolved), if it names any."""
+    from fusionkit.cli.evaluate import _map_of, read_truth
+
+    if not (directory / "truth.json").is_file():
+        return set()
+    try:
+        truth = read_truth(directory / "truth.json")
+    except (FusionkitError, OSError):
+        return set()
+    return {_map_of(truth, name).resolve() for name in truth.robots}
 
 
 #: a group map a merge writes beside its output NAME.yaml: NAME.group1.yaml, ...

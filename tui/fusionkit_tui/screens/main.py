@@ -380,6 +380,7 @@ class MainScreen(Screen):
                                  self._export_to)
             return None
         self.exported = paths
-        self.notify(f"map {paths.yaml} (+ {paths.image.name}), report {paths.report}",
+        groups = (f", group maps {', '.join(g.name for g in paths.groups)}" if paths.groups else "")
+        self.notify(f"map {paths.yaml} (+ {paths.image.name}){groups}, report {paths.report}",
                     title="Exported", timeout=8)
         return paths
