@@ -28,6 +28,7 @@ RGB, RGBA; 8- or 16-bit).
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 from pathlib import Path
@@ -284,6 +285,22 @@ def save_maps(maps, report=None, *, image_format: str = "pgm", inputs=(), remove
     check_not_input([y for y, _ in yamls] + [p for p, _ in files] + [commit[0]] + remove, protected)
     files += [(p, None) for p in remove]
     write_set(files, commit, hide_first=[y for y, _ in yamls])
+
+
+def map_digest(yaml_path) -> str:
+    """SHA-256 of a map's YAML and the image it names, read as bytes: what a merge report keeps
+    of each input, so that an evaluation can tell the file merged from a later one of that
+    name (a new run written into the same folder)."""
+    h = hashlib.sha256()
+    for p in _protected([yaml_path]):
+        h.update(len(p.name).to_bytes(4, "little") + p.name.encode())
+        try:
+            with open(p, "rb") as fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
+        except OSError:
+            h.update(b"-")
+    return h.hexdigest()
 
 
 def group_map_files(yaml_path) -> list[Path]:

@@ -413,3 +413,19 @@ def test_a_map_of_another_run_is_refused_from_any_folder(tmp_path, monkeypatch, 
     assert "is not in the run of" in capsys.readouterr().err
     assert main(["evaluate", str(tmp_path / "runs/three/merged.yaml"), "--truth",
                  str(tmp_path / "runs/three/truth.json"), "--json"]) == 0
+
+
+def test_a_merge_of_maps_since_replaced_by_a_new_run_is_refused(tmp_path, monkeypatch, capsys):
+    """A folder simulated again holds new maps under the old names: a merge of the old ones,
+    evaluated against the new truth, matched by path and was scored (36.98 m off, exit 0)."""
+    from fusionkit.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "outm").mkdir()
+    assert main(["simulate", "--robots", "2", "--poses", "60", "--seed", "1", "--out", "w3", "--quiet"]) == 0
+    main(["merge", "w3/robot_1.yaml", "w3/robot_2.yaml", "-o", "outm/m.yaml", "--quiet"])
+    assert main(["evaluate", "outm/m.yaml", "--truth", "w3/truth.json", "--json"]) == 0
+    assert main(["simulate", "--robots", "2", "--poses", "60", "--seed", "2", "--out", "w3", "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["evaluate", "outm/m.yaml", "--truth", "w3/truth.json"]) == 2
+    assert "is not the file that was merged" in capsys.readouterr().err

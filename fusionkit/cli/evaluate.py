@@ -21,6 +21,7 @@ from .._atomic import show
 from .._inputs import read_json
 from ..errors import InputError
 from ..labels import clip_left, fixed
+from ..mapio import map_digest
 from ..transform import Transform2D
 
 __all__ = ["register", "run", "Truth", "read_truth", "robot_of", "find_report", "read_report", "evaluate_files"]
@@ -280,13 +281,13 @@ def read_report(path, merged) -> dict:
         for m in members:
             t = _transform(path, m, "group_transform")
             maps.append({"input": m["input"], "merged": t is not None,
-                         "confidence": _confidence(m), "transform": t})
+                         "confidence": _confidence(m), "transform": t, "sha256": m.get("sha256")})
         return {**doc, "reference": members[0]["group_reference"], "maps": maps, "group": group}
     maps = []
     for m in doc["maps"]:
         t = _transform(path, m, "transform")
         maps.append({"input": m["input"], "merged": bool(m.get("merged", t is not None)) and t is not None,
-                     "confidence": _confidence(m), "transform": t})
+                     "confidence": _confidence(m), "transform": t, "sha256": m.get("sha256")})
     return {**doc, "maps": maps, "group": None}
 
 
@@ -360,6 +361,11 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
             name = robot_of(truth_info, m["input"], bases=bases, others=inputs)
         except InputError as exc:
             raise InputError(f"{report_path}: {exc}") from None
+        mine = _map_of(truth_info, name)
+        if isinstance(m.get("sha256"), str) and mine.is_file() and map_digest(mine) != m["sha256"]:
+            raise InputError(f"{report_path}: map {show(m['input'])} is not the file that was merged: "
+                             f"{mine} has changed since (a new run written into its folder?); merge "
+                             f"that run's maps again")
         true_rel = t_ref.inverse @ robots[name]
         est = m["transform"]
         err = transform_errors(est, true_rel, fused.resolution).as_dict() if est is not None else None

@@ -127,6 +127,10 @@ def write_result(result, inputs, out, report_path, *, guard=None, output_name=No
     stale = [q for q in group_map_files(out) if q not in set(group_files)]
     guard.check([out, out.with_suffix(".pgm"), report_path, *group_files, *stale])
     report = result.report([str(p) for p in inputs], output=str(out if output_name is None else output_name))
+    from ..mapio import map_digest
+
+    for entry, path in zip(report["maps"], inputs):   # which files were merged, for evaluate
+        entry["sha256"] = map_digest(path)
     save_maps([(result.grid, out)] + [(g.grid, q) for g, q in zip(result.groups, group_paths)],
               (report_path, json.dumps(report, indent=2) + "\n"), inputs=guard.inputs, remove=stale)
     return group_paths
