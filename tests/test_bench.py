@@ -122,3 +122,34 @@ def test_bad_settings_are_refused():
         BenchConfig(robots=(1,))
     with pytest.raises(InputError):
         BenchConfig(min_overlap=0.9, max_overlap=0.5)
+
+
+def test_the_bench_outputs_are_one_set(tmp_path, monkeypatch):
+    """bench.md, bench.json and the pictures were written one by one: interrupted, a new
+    bench.md stood beside the old bench.json and old pictures."""
+    import os
+
+    from fusionkit import _atomic
+
+    first = run_bench([CAVE], BenchConfig(methods=("map-merge", "hough-spectrum"), modes=("crop",),
+                                          cases=2, robots=(2,), seed=3))
+    second = run_bench([CAVE], BenchConfig(methods=("map-merge",), modes=("crop",), cases=3,
+                                           robots=(2,), seed=4))
+    write_outputs(first, tmp_path)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    real, calls = os.replace, []
+
+    def interrupted(src, dst):
+        calls.append(dst)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(src, dst)
+
+    monkeypatch.setattr(_atomic.os, "replace", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_outputs(second, tmp_path)
+    monkeypatch.setattr(_atomic.os, "replace", real)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    write_outputs(second, tmp_path)                  # whole: the other method's picture goes
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bench.json", "bench.md", "bench_map-merge.png"]
+    assert len(json.loads((tmp_path / "bench.json").read_text())["cases"]) == 3

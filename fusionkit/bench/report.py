@@ -4,6 +4,7 @@ the figure of one case per method.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import statistics
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import atomic_path, write_text_atomic
+from .._atomic import write_set
 from ..grid import OccupancyGrid
 from ..resample import resample
 from ..transform import Transform2D
@@ -186,7 +187,7 @@ def _json_default(o):
     raise TypeError(type(o).__name__)
 
 
-def _render(path: Path, showcase: dict, method: str, record: dict) -> None:
+def _render(showcase: dict, method: str, record: dict) -> bytes:
     """One picture of the showcase case for ``method``: its fused map placed in the world by
     the reference's true transform, over the world's walls."""
     import matplotlib
@@ -218,26 +219,32 @@ def _render(path: Path, showcase: dict, method: str, record: dict) -> None:
     ax.set_xticks([])
     ax.set_yticks([])
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=90)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90)
     plt.close(fig)
+    return buf.getvalue()
 
 
 def write_outputs(result: BenchResult, out_dir: str | os.PathLike, summary: dict | None = None) -> list[Path]:
-    """Write ``bench.md``, ``bench.json`` and ``bench_<method>.png`` into ``out_dir``."""
+    """Write ``bench.md``, ``bench.json`` and ``bench_<method>.png`` into ``out_dir``, as one set
+    (:func:`fusionkit._atomic.write_set`, ``bench.json`` written last): an interrupted write
+    leaves the earlier run's files whole, never new tables beside old pictures. Pictures of
+    methods this run did not have are removed with it."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     s = summary or summarize(result)
-    paths = [out / "bench.md", out / "bench.json"]
-    write_text_atomic(paths[0], format_markdown(result, s) + "\n")
-    doc = {"config": asdict(result.config), "command": result.command,
-           "worlds": [asdict(w) for w in result.worlds], "skipped": [list(x) for x in result.skipped],
-           "seconds": round(result.seconds, 2), "summary": s, "cases": list(result.cases)}
-    write_text_atomic(paths[1], json.dumps(doc, indent=1, default=_json_default) + "\n")
+    files = []
     if result.showcase is not None:
         rec = dict(result.cases[result.showcase["index"]])
         for m in result.config.methods:
-            p = out / f"bench_{m}.png"
-            _render(p, result.showcase, m, dict(rec["methods"][m], world=rec["world"]))
-            paths.append(p)
-    return paths
+            files.append((out / f"bench_{m}.png",
+                          _render(result.showcase, m, dict(rec["methods"][m], world=rec["world"]))))
+    files.append((out / "bench.md", (format_markdown(result, s) + "\n").encode("utf-8")))
+    doc = {"config": asdict(result.config), "command": result.command,
+           "worlds": [asdict(w) for w in result.worlds], "skipped": [list(x) for x in result.skipped],
+           "seconds": round(result.seconds, 2), "summary": s, "cases": list(result.cases)}
+    commit = (out / "bench.json", (json.dumps(doc, indent=1, default=_json_default) + "\n").encode("utf-8"))
+    new = {p for p, _ in files}
+    stale = [p for p in sorted(out.glob("bench_*.png")) if p not in new and p.is_file()]
+    write_set(files + [(p, None) for p in stale], commit)
+    return [out / "bench.md", out / "bench.json"] + [p for p, _ in files if p.suffix == ".png"]
