@@ -135,6 +135,8 @@ def test_negative_numbers_and_abbreviations_are_not_taken_for_unknown_options(ca
     (["merge", "a.yaml", "b.yaml", "-o", "m.yaml", "--delta", "-1"], "--delta: must be >= 0"),
     (["run", "--merge-seed", "-1", "--out", "never_written"], "--merge-seed: must be between 0"),
     (["merge", "a.yaml"], "the following arguments are required: -o/--output"),
+    # --split 1 wrote one map named after the log, no robot_1, no truth.json
+    (["import", "carmen", "x.log", "--out", "d", "--split", "1"], "--split: must be between 2"),
 ])
 def test_a_bad_option_value_is_one_line_before_any_work(capsys, tmp_path, monkeypatch, argv, words):
     """A value the command cannot use is refused by the option's own check: one line, exit 2,

@@ -54,9 +54,9 @@ def register(sub) -> None:
     c.add_argument("--name", metavar="NAME",
                    help="file stem of the outputs (default: the log's file name up to its "
                         "first dot, e.g. intel for intel.gfs.log); not allowed with --split")
-    c.add_argument("--split", type=int_range(1, 100), metavar="K",
-                   help="cut the log into K overlapping sessions robot_1..robot_K "
-                        "(default: no split)")
+    c.add_argument("--split", type=int_range(2, 100), metavar="K",
+                   help="cut the log into K >= 2 overlapping sessions robot_1..robot_K "
+                        "(default: no split, one map named after the log)")
     c.add_argument("--overlap", type=float_range(0.0, 0.9), default=0.3, metavar="F",
                    help="with --split: fraction of each session shared with the next, "
                         "0..0.9 (default: %(default)s)")
