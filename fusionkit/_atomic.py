@@ -250,7 +250,6 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
                     staged.append(tmp)
                     writing = p
                     _write_durable(tmp, payload)
-                writing = commit_path
                 with _signals.deferred():
                     if _commit(items, commit_path, commit_payload, staged, hide, token):
                         COMMITTED.append(commit_path)   # before a held-back signal comes

@@ -328,6 +328,7 @@ class DaskExecutor(Executor):
             raise InputError("the Dask back end needs dask and distributed: "
                              "pip install 'fusionkit[dask]'") from None
         self._cluster = None
+        self._answered: dict = {}   # dashboard link -> whether it serves pages
         self._client = None
         self._dashboard = False
         self._shared = None
@@ -390,10 +391,12 @@ class DaskExecutor(Executor):
         if "dashboard" not in self._client.scheduler_info().get("services", {}):
             return None                                   # bokeh is not installed there
         link = self._client.dashboard_link or None
-        if link is not None and self._cluster is None and not _answers(link):
-            # a scheduler started elsewhere serves its HTTP port without the dashboard
-            # pages when bokeh is missing or --no-dashboard was given
-            return None
+        if link is not None and self._cluster is None:
+            # a scheduler started elsewhere serves its HTTP port without the dashboard pages
+            # when bokeh is missing or --no-dashboard was given: asked once
+            if link not in self._answered:
+                self._answered[link] = _answers(link)
+            return link if self._answered[link] else None
         return link
 
     def describe(self) -> str:

@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._atomic import _short, check_not_input, show, write_set
+from ._atomic import _digest, _short, check_not_input, show, write_set
 from ._inputs import read_bytes
 from .errors import FusionkitError, InputError, MapFormatError
 from .grid import FREE, OCCUPIED, OccupancyGrid
@@ -293,14 +293,32 @@ def map_digest(yaml_path) -> str:
     name (a new run written into the same folder)."""
     h = hashlib.sha256()
     for p in _protected([yaml_path]):
-        h.update(len(p.name).to_bytes(4, "little") + p.name.encode())
-        try:
-            with open(p, "rb") as fh:
-                for block in iter(lambda: fh.read(1 << 20), b""):
-                    h.update(block)
-        except OSError:
-            h.update(b"-")
+        h.update(f"{p.name}:{_digest(p) or '-'};".encode())
     return h.hexdigest()
+
+
+def merge_reports(folder) -> list[tuple[Path, dict]]:
+    """The merge reports among the ``*.json`` files directly in ``folder`` (any name: ``merge
+    --report R.json``), read: those holding a ``maps`` list and an ``output`` path. Unreadable
+    or other JSON files are passed over."""
+    from ._inputs import read_json
+
+    try:
+        entries = sorted(Path(folder).iterdir())
+    except OSError:
+        return []
+    found = []
+    for p in entries:
+        if p.suffix.lower() != ".json" or not p.is_file():
+            continue
+        try:
+            doc = read_json(p, "merge report")
+        except (FusionkitError, OSError):
+            continue
+        if isinstance(doc, dict) and isinstance(doc.get("maps"), list) \
+                and isinstance(doc.get("output"), str):
+            found.append((p, doc))
+    return found
 
 
 def group_map_files(yaml_path) -> list[Path]:

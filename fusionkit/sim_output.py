@@ -50,21 +50,14 @@ def merges_of_run(out: Path) -> list[Path]:
     each merge report there whose inputs are all maps named as a simulation names them
     (``robot_K.yaml``), the report, the merged map it names (YAML and image) and its group maps.
     A new run into ``out`` makes them wrong: they would be scored against the new truth."""
-    from ._inputs import read_json
+    from .mapio import merge_reports
 
     found: list[Path] = []
-    try:
-        entries = sorted(out.iterdir()) if out.is_dir() else []
-    except OSError:
-        return []
-    for report in entries:
-        if report.suffix != ".json" or report.name == "truth.json" or not report.is_file():
-            continue
+    for report, doc in merge_reports(out):
         try:
-            doc = read_json(report, "merge report")
             inputs = [Path(m["input"]).name for m in doc["maps"]]
             outputs = [Path(doc["output"]).name, *(Path(g).name for g in doc.get("group_outputs") or [])]
-        except (FusionkitError, TypeError, KeyError, AttributeError):
+        except (TypeError, KeyError):
             continue
         if not inputs or not all(_ROBOT_NAME.fullmatch(n.removesuffix(".yaml")) for n in inputs):
             continue

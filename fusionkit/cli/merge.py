@@ -117,18 +117,17 @@ def write_result(result, inputs, out, report_path, *, guard=None, output_name=No
     (``guard``, :meth:`OutputGuard.of` the inputs when not given). The report names the output
     ``output_name`` (default ``out``) and the inputs as given. Returns the group maps' paths.
     """
-    from ..mapio import group_map_files, save_maps
+    from ..mapio import group_map_files, map_digest, save_maps
     from ..pipeline import group_output_paths
 
     out = Path(out)
     guard = OutputGuard.of(inputs) if guard is None else guard
     group_paths = group_output_paths(out, len(result.groups))
     group_files = group_paths + [q.with_suffix(".pgm") for q in group_paths]
-    stale = [q for q in group_map_files(out) if q not in set(group_files)]
+    new = set(group_files)
+    stale = [q for q in group_map_files(out) if q not in new]
     guard.check([out, out.with_suffix(".pgm"), report_path, *group_files, *stale])
     report = result.report([str(p) for p in inputs], output=str(out if output_name is None else output_name))
-    from ..mapio import map_digest
-
     for entry, path in zip(report["maps"], inputs):   # which files were merged, for evaluate
         entry["sha256"] = map_digest(path)
     save_maps([(result.grid, out)] + [(g.grid, q) for g, q in zip(result.groups, group_paths)],

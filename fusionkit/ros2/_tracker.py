@@ -141,11 +141,12 @@ class Tracker:
         s_new = s_old = None
         if score is not None and estimate != held.transform:
             s_new, s_old = float(score(estimate)), float(score(held.transform))
-        if same_place(estimate, held.transform, resolution) and not (s_new is not None and s_new > s_old):
+        better = s_new is not None and s_new > s_old
+        if same_place(estimate, held.transform, resolution) and not better:
             self._pending.pop(robot, None)
             held.confidence = confidence
             return Decision(robot, "confirmed", held.transform, confidence)
-        if s_new is not None and s_new > s_old and near_place(estimate, held.transform, resolution):
+        if better and near_place(estimate, held.transform, resolution):
             self._pending.pop(robot, None)
             self._held[robot] = _Held(estimate, confidence)
             return Decision(robot, "refined", estimate, confidence,

@@ -317,10 +317,8 @@ class MergeNode:
                 version = self._map_version
                 ref = self.reference
                 snapshot = [(n, r.grid) for n, r in self.robots.items() if r.grid is not None]
-            # a switch waiting for its confirmations is estimated again on unchanged maps: a
-            # robot whose map stopped growing must not keep a transform found worse
-            ref_robot = self.robots.get(ref) if ref is not None else None
-            if ref_robot is not None and ref_robot.grid is not None and not ref_robot.walls:
+                ref_bare = ref in dict(snapshot) and not self.robots[ref].walls
+            if ref_bare:
                 # a named reference whose map holds no wall yet: nothing can be placed by it
                 self._once(("nowall", ref), f"waiting for the reference robot {ref}'s map "
                            f"to show a wall (reference_robot)", "info")
@@ -328,6 +326,8 @@ class MergeNode:
                     self._publish_status()
                     done = version
                 continue
+            # a switch waiting for its confirmations is estimated again on unchanged maps: a
+            # robot whose map stopped growing must not keep a transform found worse
             if (version == done and not self.tracker.pending()) or ref not in dict(snapshot) \
                     or len(snapshot) < 2:
                 if ref is not None and snapshot and ref not in dict(snapshot):

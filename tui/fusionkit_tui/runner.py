@@ -73,7 +73,7 @@ def find_maps(directory) -> list[Path]:
         entries = sorted(directory.iterdir())
     except OSError as exc:
         raise InputError(f"{directory}: cannot be listed ({exc.strerror or exc}); check its permissions") from None
-    merged = _merge_outputs(entries)
+    merged = _merge_outputs(directory)
     out = []
     for p in entries:
         if not p.is_file() or not is_map_file(p):
@@ -110,23 +110,13 @@ def _run_robots(directory: Path) -> set:
 _GROUP_MAP = re.compile(r"(.+)\.group[1-9][0-9]{0,3}\.(yaml|yml)")
 
 
-def _merge_outputs(entries) -> set[str]:
-    """The names of the maps that merge reports among ``entries`` (a directory's files) name as
-    their output or group outputs: a report of ``fusionkit merge --report R.json`` need not be
-    named after its map."""
+def _merge_outputs(directory: Path) -> set[str]:
+    """The names of the maps that merge reports in ``directory`` name as their output or group
+    outputs: a report of ``fusionkit merge --report R.json`` need not be named after its map."""
+    from fusionkit.mapio import merge_reports
+
     names = set()
-    for p in entries:
-        if p.suffix.lower() != ".json" or not p.is_file():
-            continue
-        try:
-            if p.stat().st_size > 16 * 1024 * 1024:
-                continue
-            doc = json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, UnicodeError, ValueError, RecursionError):
-            continue
-        if not (isinstance(doc, dict) and isinstance(doc.get("maps"), list)
-                and isinstance(doc.get("output"), str)):
-            continue
+    for _, doc in merge_reports(directory):
         outputs = [doc["output"], *(doc.get("group_outputs") or [])]
         names.update(Path(o).name for o in outputs if isinstance(o, str))
     return names
