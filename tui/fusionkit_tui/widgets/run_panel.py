@@ -97,6 +97,11 @@ class RunPanel(Vertical):
     def plot(self) -> ConvergencePlot:
         return self.query_one(ConvergencePlot)
 
+    @property
+    def _swarm(self) -> bool:
+        """The merge is the paper's method's: alignments by a swarm, which the plot follows."""
+        return self._stage_list is STAGES
+
     def _stages(self, current: str, step: int = 0, total: int = 0, final: str = "",
                 stopped: bool = False) -> Text:
         names = [s for s, _ in self._stage_list]
@@ -170,7 +175,7 @@ class RunPanel(Vertical):
         if ev.stage == "align":
             colour = robot_colour(ev.pair[1]) if ev.pair else None
             if self._stage != "align" or ev.step != self._step:
-                if self._stage_list is STAGES:   # a swarm to plot: only the paper's method
+                if self._swarm:   # a swarm to plot: only the paper's method
                     self.plot.start(ev.label, colour)
                     self._legend()
                 self._step, self._phase, self._last_iteration = ev.step, 0, -1
@@ -188,10 +193,10 @@ class RunPanel(Vertical):
                 detail.update(f"{phase} {ev.label}: iteration {ev.iteration} of at most "
                               f"{self._iterations}, best cost {ev.best_cost:.5g}")
             else:
-                detail.update(f"{'aligning' if self._stage_list is STAGES else 'placing'} "
+                detail.update(f"{'aligning' if self._swarm else 'placing'} "
                               f"{ev.label}")
             after = ev.total - ev.step - 1
-            what = "alignment" if self._stage_list is STAGES else "pair"
+            what = "alignment" if self._swarm else "pair"
             left.update(f"{what} {ev.step + 1} of {ev.total}; "
                         f"{after} more after this, then fusion")
         else:

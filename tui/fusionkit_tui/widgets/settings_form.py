@@ -81,9 +81,7 @@ def used_settings(method: str) -> set[str]:
     """The keys of the settings ``method`` reads (the others are dimmed in the form)."""
     if method == "spectral-pso":
         return {s.key for s in SETTINGS if s.help.startswith("spectral-pso")} | {"seed", "seeding"}
-    if method == "consensus":
-        return {"max_false_merge", "seed"}
-    return {"max_false_merge", "seed"}   # the peers' confidence is the consensus test's
+    return {"max_false_merge", "seed"}   # consensus, and the peers: theirs is the consensus test
 
 
 def _settings() -> tuple[Setting, ...]:
