@@ -453,3 +453,28 @@ def test_a_reference_robot_whose_map_has_not_come_is_not_said_placed(procs, run3
     r1 = status["robots"]["/robot_1"]
     assert r1["placed"] is False and r1["map"] is None
     assert r1["reason"] == "no valid map received yet"
+
+
+def test_a_map_that_changes_nothing_merged_does_not_send_the_merged_map_again(procs, run3,
+                                                                              tmp_path):
+    """Every map message of a robot not yet placed sent the same merged map again (at start-up,
+    twice): a subscriber such as a navigation stack redoes its work for nothing."""
+    probe_out = tmp_path / "probe.jsonl"
+    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
+                          "robot_1", "robot_2"])
+    procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
+                                      "-p", "estimation_rate:=2.0"])
+    procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER,
+                        f"robot_1={run3 / 'robot_1.yaml'}@0", "robot_2=unknown@3",
+                        "robot_2=unknown@4", "robot_2=unknown@5"])
+
+    def robot_2_seen_thrice():
+        sts = [s["status"] for s in _records(probe_out, "status")]
+        return any(s["robots"].get("/robot_2", {}).get("updates") == 3 for s in sts)
+
+    _wait(robot_2_seen_thrice, 90, procs, "the third map of robot_2")
+    time.sleep(2.0)   # eight merging periods, four estimation periods
+    assert procs.stop("pub") == 0 and procs.stop("node") == 0
+    maps = _records(probe_out, "map")
+    assert len(maps) == 1, maps
+    assert maps[0]["occupied"] == int(fk.load_map(run3 / "robot_1.yaml").occupied_mask().sum())

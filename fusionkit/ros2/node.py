@@ -262,6 +262,9 @@ class MergeNode:
         period = 1.0 / self.s.merging_rate
         done = (-1, -1)
         last = -math.inf
+        # the maps and transforms of the merged map last published: a map of a robot not yet
+        # placed changes the version but not the merged map, which is not sent again
+        sent: list = []
         while not self._stop.is_set():
             self._wake_compose.wait(timeout=1.0)
             self._wake_compose.clear()
@@ -287,12 +290,18 @@ class MergeNode:
                     continue
                 if ref_grid is not None:  # the reference first: its resolution is the merged one
                     placed.sort(key=lambda gh: gh[0] is not ref_grid)
+                if len(placed) == len(sent) and all(
+                        g is g0 and h[0] == h0[0] for (g, h), (g0, h0) in zip(placed, sent)):
+                    done = version
+                    self._publish_status()
+                    continue
                 import fusionkit as fk
                 t0 = time.perf_counter()
                 fused = fk.fuse_maps([g for g, _ in placed], [h[0] for _, h in placed]).grid
                 msg = self._GridMsg()
                 fill_msg(msg, fused, self.s.world_frame, self._stamp())
                 self.merged_pub.publish(msg)
+                sent = placed
                 self.last_merge_s = round(time.perf_counter() - t0, 4)
                 last, done = time.monotonic(), version
                 self._publish_status()
