@@ -321,12 +321,16 @@ def merge_reports(folder) -> list[tuple[Path, dict]]:
     return found
 
 
+#: what a group map's name adds to its merge output's stem: ``NAME.group1.yaml``, ...
+GROUP_SUFFIX = r"\.group[1-9][0-9]{0,3}"
+
+
 def group_map_files(yaml_path) -> list[Path]:
     """The group maps of a merge written beside ``yaml_path`` (``NAME.groupK.yaml`` and its
     ``.pgm``/``.png``), found by name only (never by what a file says)."""
     yaml_path = Path(yaml_path)
     parent = yaml_path.parent if str(yaml_path.parent) else Path(".")
-    pattern = re.compile(re.escape(yaml_path.stem) + r"\.group[1-9][0-9]{0,3}\.(yaml|yml|pgm|png)")
+    pattern = re.compile(re.escape(yaml_path.stem) + GROUP_SUFFIX + r"\.(yaml|yml|pgm|png)")
     try:
         names = os.listdir(parent)
     except OSError:

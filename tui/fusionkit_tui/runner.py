@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 from fusionkit.errors import FusionkitError, InputError
+from fusionkit.mapio import GROUP_SUFFIX
 from fusionkit.pipeline import MergeConfig, MergeEvent, MergeResult, merge
 
 __all__ = ["MAP_SUFFIXES", "is_map_file", "find_maps", "truth_beside", "Evaluation",
@@ -107,7 +108,7 @@ def _run_robots(directory: Path) -> set:
 
 
 #: a group map a merge writes beside its output NAME.yaml: NAME.group1.yaml, ...
-_GROUP_MAP = re.compile(r"(.+)\.group[1-9][0-9]{0,3}\.(yaml|yml)")
+_GROUP_MAP = re.compile(r"(.+)" + GROUP_SUFFIX + r"\.(yaml|yml)")
 
 
 def _merge_outputs(directory: Path) -> set[str]:
