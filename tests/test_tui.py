@@ -766,3 +766,31 @@ def test_ctrl_c_ends_the_process_while_a_merge_is_busy(in_root):
     tail = seen.decode(errors="replace").replace("\r", "").strip().splitlines()[-1]
     assert tail.endswith("fusionkit tui: interrupted; no output was left half-written"), tail
     assert b"\x1b[?1049l" in seen                     # the terminal left the UI's screen
+
+
+@pytest.mark.parametrize("iterations, width", [(8, 60), (3, 100), (200, 100), (40, 200)])
+async def test_the_convergence_plot_counts_iterations_in_whole_numbers(iterations, width):
+    """Its axis read 0.0, 1.8, 3.5 ... iterations (0.00, 0.50 ... for a swarm of three)."""
+    import re
+
+    from textual.app import App
+
+    from fusionkit_tui.widgets.convergence_plot import ConvergencePlot
+
+    class One(App):
+        def compose(self):
+            yield ConvergencePlot()
+
+    app = One()
+    async with app.run_test(size=(width, 20)) as pilot:
+        plot = app.query_one(ConvergencePlot)
+        plot.start("robot_2 -> robot_1")
+        for i in range(iterations):
+            plot.add(i, 10.0 / (i + 1))
+        await pilot.pause()
+        lines = ["".join(seg.text for seg in plot.render_line(y)) for y in range(plot.size.height)]
+    axis = next(k for k, line in enumerate(lines) if line.lstrip().startswith("└"))
+    labels = lines[axis + 1].split()
+    assert len(labels) >= 2 or iterations == 1, lines[axis + 1]
+    assert all(re.fullmatch(r"\d+", x) for x in labels), lines[axis + 1]
+    assert 0 <= int(labels[0]) and int(labels[-1]) <= iterations - 1

@@ -4,10 +4,25 @@ from __future__ import annotations
 
 from textual_plotext import PlotextPlot
 
-__all__ = ["ConvergencePlot", "MONO_MARKERS"]
+__all__ = ["ConvergencePlot", "MONO_MARKERS", "integer_ticks"]
 
 #: Markers of the successive lines when there is no colour (``NO_COLOR``).
 MONO_MARKERS = ("braille", "+", "x", "o", "*", "#", "@", "%")
+
+
+def integer_ticks(lo: int, hi: int, most: int = 6) -> list[int]:
+    """Ticks for an axis of whole numbers from ``lo`` to ``hi``: the multiples in that range
+    of the least step of 1, 2 or 5 times a power of ten that gives at most ``most`` (at least
+    2) of them; never a fraction (an iteration has no half)."""
+    lo, hi = int(lo), int(hi)
+    if hi <= lo:
+        return [lo]
+    most = max(int(most), 2)
+    step, k = 1, 0
+    while (hi // step) - (-(-lo // step)) + 1 > most:
+        k += 1
+        step = (1, 2, 5)[k % 3] * 10 ** (k // 3)
+    return list(range(-(-lo // step) * step, hi + 1, step))
 
 
 class ConvergencePlot(PlotextPlot):
@@ -77,7 +92,10 @@ class ConvergencePlot(PlotextPlot):
                 else:
                     plt.plot(xs, ys, marker=marker, color=rgb)
                 drawn = True
-        if not drawn:
+        if drawn:
+            xs = [x for _, xs, _ in self._series for x in xs]
+            plt.xticks(integer_ticks(min(xs), max(xs), self.size.width // 12))
+        else:
             plt.xlim(0, 1)
             plt.ylim(0, 1)
         return super().render()
