@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import threading
 from typing import TYPE_CHECKING
 
@@ -42,12 +43,38 @@ def _raise(signum, frame):  # noqa: ARG001 (signal handler signature)
     raise KeyboardInterrupt()
 
 
+#: Seconds before a signal whose exception was swallowed is sent again.
+_AGAIN_S = 0.01
+
+
+def _unraisable(hook):
+    """A ``sys.unraisablehook`` that gives an interrupt back to the program.
+
+    Python ignores an exception raised where nothing can catch it: in a ctypes callback
+    (numba's compiler calls some while it loads its cached kernels), a ``__del__``, a weakref
+    callback. An interrupt raised there was lost and the command went on to the end. Its signal
+    is sent again a moment later, when the main thread is most likely back in plain code (and
+    again, should it land in such a place once more); anything else goes to ``hook``."""
+    def unraisable(info):
+        exc = info.exc_value
+        if isinstance(exc, KeyboardInterrupt) and all(signal.getsignal(s) is _raise
+                                                      for s in _SIGNALS):
+            signum = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
+            threading.Timer(_AGAIN_S, os.kill, (os.getpid(), signum)).start()
+            return
+        hook(info)
+    unraisable.installed = True
+    return unraisable
+
+
 def install() -> None:
     """Turn SIGINT and SIGTERM into exceptions (main thread only; elsewhere a no-op)."""
     if threading.current_thread() is not threading.main_thread():
         return
     for s in _SIGNALS:
         signal.signal(s, _raise)
+    if not getattr(sys.unraisablehook, "installed", False):
+        sys.unraisablehook = _unraisable(sys.unraisablehook)
 
 
 def pending() -> bool:

@@ -313,13 +313,26 @@ _CLI = textwrap.dedent("""
         if len(calls) == k:
             os.kill(os.getpid(), getattr(signal, how))
         return real(src, dst)
-    if k:
+    if k > 0:
         _atomic.os.replace = signalled
     else:  # while computing, before anything is written
+        import ctypes
         import fusionkit.simulate as sim
         compute = sim.simulate
-        def interrupted(*a, **kw):
+        def signal_now():
             os.kill(os.getpid(), getattr(signal, how))
+            sum(range(100000))          # the handler runs here
+        def interrupted(*a, **kw):
+            if k == -1:   # inside a ctypes callback (numba's compiler calls some): Python
+                ctypes.CFUNCTYPE(None)(signal_now)()     # ignores what is raised there
+            elif k == -2:   # inside Python code a compiled function called, which reports the
+                try:        # interrupt as its own failure (as a numba dispatcher does)
+                    signal_now()
+                except KeyboardInterrupt as exc:
+                    raise SystemError("CPUDispatcher(<function kernel>) returned a result "
+                                      "with an exception set") from exc
+            else:
+                signal_now()
             return compute(*a, **kw)
         sim.simulate = interrupted
     from fusionkit.cli import main
@@ -346,9 +359,12 @@ def earlier_run(tmp_path_factory):
 
 
 @pytest.mark.parametrize("k, how, code", [(0, "SIGINT", 130), (0, "SIGTERM", 143),
-                                          (6, "SIGTERM", 143), (9, "SIGINT", 130)],
+                                          (6, "SIGTERM", 143), (9, "SIGINT", 130),
+                                          (-1, "SIGINT", 130), (-1, "SIGTERM", 143),
+                                          (-2, "SIGTERM", 143)],
                          ids=["SIGINT computing", "SIGTERM computing", "SIGTERM mid-commit",
-                              "SIGINT mid-commit"])
+                              "SIGINT mid-commit", "SIGINT in a ctypes callback",
+                              "SIGTERM in a ctypes callback", "SIGTERM in a compiled function"])
 def test_a_signalled_command_exits_130_or_143_with_one_line_and_its_outputs_unchanged(
         earlier_run, k, how, code):
     before = _files(earlier_run)

@@ -156,22 +156,15 @@ def _main(argv) -> int:
             str(v) for v in (getattr(args, k, None) for k in ("kind", "ros2_command")) if v])
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM as _signals.Terminated
-        _quiet_signals()
-        if _command_of(sys.argv[1:] if argv is None else list(argv)) == "ros2":
-            # the ROS 2 commands run until stopped and write nothing: stopped while they start
-            # up, they end as they do once running, with exit 0
-            return 0
-        term = isinstance(exc, _signals.Terminated)
-        atomic = sys.modules.get("fusionkit._atomic")
-        written = list(atomic.COMMITTED) if atomic is not None else []
-        if written:   # the signal came after a set of outputs was committed: that one is new
-            _say(f"{command}: {'terminated' if term else 'interrupted'} after writing "
-                 f"{_one_line(written[-1])} (its set of outputs is whole and new); nothing "
-                 f"was left half-written")
-        else:
-            _say(f"{command}: {'terminated' if term else 'interrupted'}; no output was left "
-                 f"half-written")
-        return _signals.EXIT_SIGTERM if term else _signals.EXIT_SIGINT
+        return _interrupted(command, argv, exc)
+    except SystemError as exc:
+        # a compiled function (a numba kernel's dispatcher) that was running Python code when
+        # the signal's exception was raised there reports it as its own failure, the
+        # interrupt as its cause
+        cause = exc.__cause__ or exc.__context__
+        if not isinstance(cause, KeyboardInterrupt):
+            raise
+        return _interrupted(command, argv, cause)
     except FusionkitError as exc:
         _say(f"{command}: error: {_one_line(exc)}")
         return 2
@@ -191,6 +184,27 @@ def _main(argv) -> int:
     except RecursionError:
         _say(f"{command}: error: an input is nested too deeply to read; check the files given")
         return 2
+
+
+def _interrupted(command: str, argv, exc: KeyboardInterrupt) -> int:
+    """Say that ``command`` was stopped by SIGINT or SIGTERM (``exc``) and what it left; its
+    exit status."""
+    _quiet_signals()
+    if _command_of(sys.argv[1:] if argv is None else list(argv)) == "ros2":
+        # the ROS 2 commands run until stopped and write nothing: stopped while they start
+        # up, they end as they do once running, with exit 0
+        return 0
+    term = isinstance(exc, _signals.Terminated)
+    atomic = sys.modules.get("fusionkit._atomic")
+    written = list(atomic.COMMITTED) if atomic is not None else []
+    if written:   # the signal came after a set of outputs was committed: that one is new
+        _say(f"{command}: {'terminated' if term else 'interrupted'} after writing "
+             f"{_one_line(written[-1])} (its set of outputs is whole and new); nothing "
+             f"was left half-written")
+    else:
+        _say(f"{command}: {'terminated' if term else 'interrupted'}; no output was left "
+             f"half-written")
+    return _signals.EXIT_SIGTERM if term else _signals.EXIT_SIGINT
 
 
 def _innermost(parser: argparse.ArgumentParser, args, argv, extra) -> argparse.ArgumentParser:
