@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import time
 from pathlib import Path
 
@@ -794,3 +795,40 @@ async def test_the_convergence_plot_counts_iterations_in_whole_numbers(iteration
     assert len(labels) >= 2 or iterations == 1, lines[axis + 1]
     assert all(re.fullmatch(r"\d+", x) for x in labels), lines[axis + 1]
     assert 0 <= int(labels[0]) and int(labels[-1]) <= iterations - 1
+
+
+def test_stopped_during_an_export_the_app_does_not_call_an_earlier_export_new(in_root, monkeypatch,
+                                                                               capsys, tmp_path):
+    """Killed while it wrote its second export (rolled back: the first export's files stand),
+    the app said 'terminated after writing ... (its set of outputs is whole and new)', of the
+    first."""
+    from fusionkit import _atomic, _signals
+    from fusionkit import cli
+    from fusionkit.pipeline import merge
+    from fusionkit_tui.runner import export_result
+
+    maps = sorted(str(p) for p in (in_root / "run").glob("robot_*.yaml"))[:2]
+    result = merge([load_map(p) for p in maps], config=MergeConfig(method="map-merge"))
+    out = tmp_path / "s.yaml"
+    export_result(result, maps, out)
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    real = _atomic._write_durable
+
+    def stopped(path, payload):   # SIGTERM while the report is staged
+        if ".report.json." in str(path):
+            raise _signals.Terminated()
+        return real(path, payload)
+
+    monkeypatch.setattr(_atomic, "_write_durable", stopped)
+    with pytest.raises(_signals.Terminated) as exc:
+        export_result(result, maps, out)
+    monkeypatch.setattr(_atomic, "_write_durable", real)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        assert cli._interrupted("fusionkit tui", ["tui"], exc.value) == 143
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    err = capsys.readouterr().err
+    assert err.strip() == "fusionkit tui: terminated; no output was left half-written", err

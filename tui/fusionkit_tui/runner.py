@@ -333,10 +333,14 @@ def export_result(result: MergeResult, inputs: Sequence, yaml_path) -> ExportPat
         A bad output name, a missing directory, or an output that is an input or a file of the
         run's ground truth.
     """
+    from fusionkit import _atomic
     from fusionkit.cli.merge import write_result
 
     paths = export_paths(yaml_path, len(result.groups))
     inputs = [str(p) for p in inputs]
+    # each export is a command of its own: stopped during this one, the app must not say that
+    # an earlier export's set is the new one
+    _atomic.COMMITTED.clear()
     write_result(result, inputs, paths.yaml, paths.report, guard=output_guard(inputs))
     return paths
 
