@@ -362,21 +362,22 @@ class DaskExecutor(Executor):
                     dashboard = False
             # everything on the loopback interface, on free ports (the scheduler's small HTTP
             # server too, which serves the dashboard when asked for and bokeh is installed)
-            # the worker processes start with Ctrl-C ignored (a disposition they inherit): a
-            # Ctrl-C at the terminal reaches every process of its group, and this process, not
-            # each worker, is the one to stop the run and close the cluster
-            main = threading.current_thread() is threading.main_thread()
-            before = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+            # a Ctrl-C at the terminal reaches every process of its group: this process, not
+            # each worker, stops the run and closes the cluster; the workers ignore it from
+            # their first import on (:mod:`fusionkit._dask_worker`). This process keeps its
+            # handler while the cluster starts (ignoring it meanwhile, as the workers' processes
+            # once inherited it, lost a Ctrl-C there and the run went on)
             try:
                 self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
                                              processes=True, host="127.0.0.1",
                                              dashboard_address="127.0.0.1:0",
                                              worker_dashboard_address=None,
+                                             preload=["fusionkit._dask_worker"],
                                              scheduler_kwargs={"dashboard": bool(dashboard)})
-            finally:
-                if main and before is not None:
-                    signal.signal(signal.SIGINT, before)
-            self._client = Client(self._cluster, set_as_default=False)
+                self._client = Client(self._cluster, set_as_default=False)
+            except BaseException:
+                self.close()
+                raise
             self._dashboard = bool(dashboard)
 
     @property

@@ -276,6 +276,51 @@ def test_ctrl_c_at_the_terminal_stops_a_dask_run_with_one_line(tmp_path):
     assert not left, "a process of the run outlived it by 10 s"
 
 
+_STARTING = """
+import os, signal, sys
+import distributed
+from fusionkit.cli import main
+real = distributed.LocalCluster
+def starting(*a, **kw):   # Ctrl-C at the terminal while the cluster starts
+    os.killpg(0, signal.SIGINT)
+    return real(*a, **kw)
+distributed.LocalCluster = starting
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_ctrl_c_while_the_dask_cluster_starts_stops_the_run(tmp_path):
+    """It was dropped: the run went on and wrote its outputs, exit 0."""
+    import os
+    import subprocess
+    import sys
+    env = dict(os.environ, NUMBA_THREADING_LAYER="threadsafe")
+    out = tmp_path / "sweep"
+    proc = subprocess.Popen([sys.executable, "-c", _STARTING, "bench", "--worlds", "cave",
+                             "--cases", "4", "--backend", "dask", "--workers", "2", "--out",
+                             str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True, env=env)
+    try:
+        err = proc.communicate(timeout=120)[1]
+        left = True
+        for _ in range(100):  # the workers go with the cluster, closed on the way out
+            try:
+                os.killpg(proc.pid, 0)
+            except ProcessLookupError:
+                left = False
+                break
+            time.sleep(0.1)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == [
+        "fusionkit bench: interrupted; no output was left half-written"], err
+    assert not out.exists()
+    assert not left, "a process of the run outlived it by 10 s"
+
+
 def test_a_scheduler_without_dashboard_pages_is_said_to_have_none(tmp_path):
     """A scheduler started with --no-dashboard (or without bokeh) still serves its HTTP port;
     the line said "dashboard: http://127.0.0.1:8787/status", a page that answers 404."""
