@@ -362,11 +362,9 @@ class DaskExecutor(Executor):
                     dashboard = False
             # everything on the loopback interface, on free ports (the scheduler's small HTTP
             # server too, which serves the dashboard when asked for and bokeh is installed)
-            # a Ctrl-C at the terminal reaches every process of its group: this process, not
-            # each worker, stops the run and closes the cluster; the workers ignore it from
-            # their first import on (:mod:`fusionkit._dask_worker`). This process keeps its
-            # handler while the cluster starts (ignoring it meanwhile, as the workers' processes
-            # once inherited it, lost a Ctrl-C there and the run went on)
+            # a Ctrl-C at the terminal reaches every process of its group: this process (its
+            # handler kept while the cluster starts), not each worker, stops the run and closes
+            # the cluster; the workers ignore it from their first import on (_dask_worker)
             try:
                 self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
                                              processes=True, host="127.0.0.1",
