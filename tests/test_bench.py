@@ -122,6 +122,20 @@ def test_bad_settings_are_refused():
         BenchConfig(robots=(1,))
     with pytest.raises(InputError):
         BenchConfig(min_overlap=0.9, max_overlap=0.5)
+    with pytest.raises(InputError, match="seed must be a whole number >= 0"):
+        BenchConfig(seed=-1)
+    assert BenchConfig(seed=np.int64(3)).seed == 3
+
+
+def test_a_negative_seed_is_one_line_and_exit_2(tmp_path, capsys):
+    """It was a 25-line traceback from numpy's seeding, exit 1."""
+    from fusionkit.cli import main
+    with pytest.raises(SystemExit) as exc:   # as argparse ends a command line it refuses
+        main(["bench", "--seed", "-1", "--cases", "1", "--out", str(tmp_path / "out")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--seed: must be between 0 and" in err, err
+    assert not (tmp_path / "out").exists()
 
 
 def test_the_bench_outputs_are_one_set(tmp_path, monkeypatch):

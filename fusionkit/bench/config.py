@@ -5,6 +5,7 @@ the suite.
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 from ..errors import InputError
@@ -95,6 +96,8 @@ class BenchConfig:
             raise InputError(f"robots per case must be between 2 and 5, got {self.robots}")
         if self.cases < 1:
             raise InputError(f"cases must be >= 1, got {self.cases}")
+        if not isinstance(self.seed, numbers.Integral) or isinstance(self.seed, bool) or self.seed < 0:
+            raise InputError(f"the seed must be a whole number >= 0, got {self.seed!r}")
         if not 0.0 < self.min_overlap < self.max_overlap <= 1.0:
             raise InputError(f"overlaps must satisfy 0 < min ({self.min_overlap}) < max "
                              f"({self.max_overlap}) <= 1")

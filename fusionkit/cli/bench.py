@@ -70,7 +70,7 @@ def register(sub) -> None:
                    help=f"success bound on the rotation error, degrees (default {d.max_rotation_deg})")
     p.add_argument("--max-cells", type=float_range(0, 1e6, lo_open=True), default=d.max_cells,
                    help=f"success bound on the centroid displacement, cells (default {d.max_cells})")
-    p.add_argument("--seed", type=int, default=d.seed, help=f"seed of the suite (default {d.seed})")
+    p.add_argument("--seed", type=int_range(0, 2**63 - 1), default=d.seed, help=f"seed of the suite (default {d.seed})")
     p.add_argument("--jobs", type=int_range(1, 64), default=1,
                    help="cases run in this many processes at once (default 1; the same as "
                         "--workers); with more than one, every method runs on one thread (with "
