@@ -296,3 +296,23 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, case):
     assert _main(["import", "carmen", *args]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("fusionkit import carmen: error: ")
+
+
+def test_a_split_imported_again_with_force_replaces_the_earlier_sessions_whole(tmp_path):
+    """Imported in 4 sessions, merged, then in 2 with --force: robot_3 and robot_4 and the merge
+    of the four stayed, merged with the new sessions and scored against the new truth."""
+    from fusionkit.cli import main
+
+    out = tmp_path / "re"
+    import_carmen(INTEL, out, split=4)
+    maps = [str(out / f"robot_{k}.yaml") for k in range(1, 5)]
+    assert main(["merge", *maps, "-o", str(out / "merged.yaml"), "--method", "map-merge",
+                 "--quiet"]) in (0, 3)
+    assert (out / "merged.report.json").is_file()
+    notes = out / "notes.txt"                    # not the run's: never removed
+    notes.write_text("mine")
+    import_carmen(INTEL, out, split=2, overwrite=True)
+    names = sorted(p.name for p in out.iterdir())
+    assert names == sorted(["notes.txt", "truth.json", "world.yaml", "world.pgm"]
+                           + [f"robot_{k}{s}" for k in (1, 2)
+                              for s in (".yaml", ".pgm", ".scans.npz")]), names
