@@ -24,9 +24,10 @@ No return
     A SICK scanner writes its maximum value when a beam returns nothing (intel: 81.83 m,
     orebro: 32.767 m) and a few error codes just below it (orebro: 32.759, 32.763, 32.765).
     The no-return value is the largest reading when it occurs more than once and is not the
-    only value (for ``ROBOTLASER1``: the record's ``max_range``); it and every reading within
-    0.1 % below it become ``inf``. With ``max_range`` given, FLASER readings at or beyond it
-    are no return instead (no detection), and ROBOTLASER1 readings at or beyond either value.
+    only value, else (a single stray reading above them) the most frequent reading within 1 %
+    below the largest when at least one reading in a thousand has it (for ``ROBOTLASER1``: the
+    record's ``max_range``); it and every reading within 0.1 % below it, or above it, become
+    ``inf``. With ``max_range`` given, readings at or beyond it are no return too.
     ``range_max`` of the scan log is ``max_range`` when given, else the largest remaining
     reading, capped at ``range_cap`` (40 m).
 
@@ -257,6 +258,26 @@ def _parse_robotlaser(tokens) -> _Scan:
 _PARSERS = {"FLASER": _parse_flaser, "ROBOTLASER1": _parse_robotlaser}
 
 
+def _no_return_value(ranges: np.ndarray) -> float | None:
+    """The FLASER no-return value of ``ranges``: the largest reading when it repeats (and is not
+    the only value); else, when a single stray reading tops them (acapulco: one 51.25 m above
+    12,284 no-return readings of 51.14-51.15 m), the most frequent reading within 1 % below the
+    largest when it repeats at least once in a thousand readings; else None."""
+    if ranges.size == 0:
+        return None
+    top = float(ranges.max())
+    if not (ranges < top * (1.0 - NO_RETURN_BAND)).any():
+        return None                              # one value only: nothing tells it apart
+    if int((ranges == top).sum()) >= 2:
+        return top
+    near = ranges[ranges >= top * (1.0 - 10 * NO_RETURN_BAND)]
+    values, counts = np.unique(near, return_counts=True)
+    k = int(np.argmax(counts))                   # the least of equally frequent values
+    if counts[k] >= max(2, ranges.size // 1000):
+        return float(values[k])
+    return None
+
+
 def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
     """Read the FLASER / ROBOTLASER1 scans of a CARMEN log (see the module notes).
 
@@ -337,11 +358,10 @@ def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
     if kind == "ROBOTLASER1":
         mrs = [s.max_range for s in scans if s.max_range is not None]
         sentinel = Counter(mrs).most_common(1)[0][0] if mrs else None
-    elif config.max_range is None:
-        top = float(ranges.max())
-        below = ranges < top * (1.0 - NO_RETURN_BAND)
-        if int((ranges == top).sum()) >= 2 and below.any():
-            sentinel = top
+    else:
+        # (also with max_range given: a scanner's real maximum is often the user's max_range
+        # too, and its no-return value, below it, was drawn as a ring of walls)
+        sentinel = _no_return_value(ranges)
     no_return = np.zeros(ranges.shape, bool)
     if sentinel is not None:
         no_return |= ranges >= sentinel * (1.0 - NO_RETURN_BAND)

@@ -19,6 +19,7 @@ from fusionkit.transform import Transform2D, wrap_angle
 
 REAL = Path("/work/shared/logs/real")
 INTEL = REAL / "intel.gfs.log"
+ACAPULCO = REAL / "acapulco.gfs.log"
 
 
 def flaser(ranges, pose, stamp, host="pippo"):
@@ -316,3 +317,24 @@ def test_a_split_imported_again_with_force_replaces_the_earlier_sessions_whole(t
     assert names == sorted(["notes.txt", "truth.json", "world.yaml", "world.pgm"]
                            + [f"robot_{k}{s}" for k in (1, 2)
                               for s in (".yaml", ".pgm", ".scans.npz")]), names
+
+
+def test_a_max_range_beyond_the_no_return_value_does_not_draw_it_as_walls(tmp_path):
+    """--max-range 90 on the Intel log (a SICK scanner: 81.83 m means no return) turned off the
+    detection: 4172 no-return readings became a ring of walls 81.83 m out, the map 3689 x 3661
+    cells instead of 773 x 811."""
+    c = read_carmen(INTEL, CarmenConfig(max_range=90.0))
+    assert c.stats.no_return_value == pytest.approx(81.83)
+    assert c.stats.no_return_readings == 4172 and c.scans.range_max == 90.0
+    a = import_carmen(INTEL, tmp_path / "a", config=CarmenConfig(max_range=90.0))
+    b = import_carmen(INTEL, tmp_path / "b")
+    assert a.robots[0].shape == b.robots[0].shape
+
+
+def test_no_return_readings_under_a_single_stray_maximum_are_found():
+    """Acapulco's scanner writes 51.14-51.15 m for no return (12,284 readings) and one reading
+    of 51.25 m tops them: none was found."""
+    c = read_carmen(ACAPULCO)
+    assert c.stats.no_return_value == pytest.approx(51.15)
+    assert 12_284 <= c.stats.no_return_readings <= 12_400
+    assert not (c.scans.ranges[np.isfinite(c.scans.ranges)] >= 51.1).any()   # 51.1-51.25 m: no return

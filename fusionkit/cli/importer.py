@@ -39,9 +39,11 @@ def register(sub) -> None:
             "FLASER beams cover 180 degrees counter-clockwise from -90 degrees: an even count n "
             "in steps of 180/n degrees (180 beams: -90..+89), an odd count from -90 to +90 "
             "inclusive (181 beams). The scanner's maximum reading (the largest value when it "
-            "repeats, e.g. 81.83 or 32.767 m) and error codes within 0.1% below it mean no "
-            "return and are stored as inf; the scan log's range_max is --max-range, else the "
-            "largest other reading capped at 40 m. Scans are sorted by timestamp (equal "
+            "repeats, e.g. 81.83 or 32.767 m; under a single stray reading, the most frequent "
+            "one near the top, e.g. 51.15 m) and error codes within 0.1% below it mean no "
+            "return and are stored as inf, as are readings at or beyond --max-range; the scan "
+            "log's range_max is --max-range, else the largest other reading capped at 40 m. "
+            "Scans are sorted by timestamp (equal "
             "timestamps keep the file order).",
             "--split K cuts the log into K consecutive sessions sharing --overlap of their "
             "length, written as robot_1..robot_K, each in its own start frame, with "
@@ -63,8 +65,9 @@ def register(sub) -> None:
     c.add_argument("--resolution", type=float_range(0.0, 10.0, lo_open=True), default=0.05,
                    metavar="M", help=_RES_HELP)
     c.add_argument("--max-range", type=float_range(0.0, 1000.0, lo_open=True), metavar="M",
-                   help="usable sensor range in metres: readings at or beyond it mean no return "
-                        "(default: detected from the log)")
+                   help="usable sensor range in metres: readings at or beyond it mean no return, "
+                        "as does the scanner's no-return value found in the log (default: the "
+                        "largest other reading, at most 40 m)")
     c.add_argument("--no-return-free", type=float_range(0.0, 1000.0), default=0.0, metavar="M",
                    help="distance in metres a no-return beam marks free space in the maps "
                         "(default: %(default)s: none, since a scanner also reports no return "
