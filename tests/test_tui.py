@@ -832,3 +832,21 @@ def test_stopped_during_an_export_the_app_does_not_call_an_earlier_export_new(in
             signal.signal(s, h)
     err = capsys.readouterr().err
     assert err.strip() == "fusionkit tui: terminated; no output was left half-written", err
+
+
+async def test_the_seeding_box_says_whether_it_is_on_or_off(in_root):
+    """It read 'on' either way: only the colour of its mark changed."""
+    from textual.widgets import Checkbox
+    app = make_app(["run"])
+    async with app.run_test(size=(120, 40)) as pilot:
+        await ready(pilot)
+        await pilot.press("2")
+        box = app.main.settings.query_one("#seeding", Checkbox)
+        box.focus()
+        await pilot.press("space")
+        await pilot.pause()
+        assert box.value is False and str(box.label) == "off"
+        assert app.main.settings.config().alignment.seeded is False
+        await pilot.press("space")
+        await pilot.pause()
+        assert box.value is True and str(box.label) == "on"

@@ -241,6 +241,11 @@ class SettingsForm(VerticalScroll, can_focus=True):
                          classes="hint")
         yield Static(_NOTE, id="settings-note")
 
+    @on(Checkbox.Changed, "#seeding")
+    def _on_seeding(self, event: Checkbox.Changed) -> None:
+        """The box says what it is set to (its mark alone hardly shows, without colour least)."""
+        event.checkbox.label = "on" if event.value else "off"
+
     @on(Select.Changed, "#method")
     def _on_method(self, event: Select.Changed) -> None:
         """The method's own words, and the settings it does not read dimmed."""
