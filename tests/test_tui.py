@@ -850,3 +850,25 @@ async def test_the_seeding_box_says_whether_it_is_on_or_off(in_root):
         await pilot.press("space")
         await pilot.pause()
         assert box.value is True and str(box.label) == "on"
+
+
+@pytest.mark.parametrize("key", ["question_mark", "m", "e"])
+async def test_a_dialog_opened_from_the_run_tab_closes_back_to_it(in_root, key):
+    """Help, the full-screen map and the export dialog, opened from the Run tab, closed onto
+    the Maps tab: an operator watching the swarm lost the plot."""
+    from textual.widgets import TabbedContent
+    app = make_app(["run"])
+    async with app.run_test(size=(120, 40)) as pilot:
+        await ready(pilot)
+        await run_merge(pilot)
+        await pilot.press("3")
+        await pilot.pause()
+        tabs = app.main.query_one(TabbedContent)
+        assert tabs.active == "run"
+        await pilot.press(key)
+        await pilot.pause()
+        assert app.screen is not app.main
+        await pilot.press("escape")
+        await pilot.pause()
+        await pilot.pause()
+        assert app.screen is app.main and tabs.active == "run"

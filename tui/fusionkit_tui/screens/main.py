@@ -164,6 +164,26 @@ class MainScreen(Screen):
         else:
             self.set_focus(None)
 
+    def on_screen_suspend(self) -> None:
+        # a dialog opens: what was shown comes back when it closes (the first focusable widget,
+        # the map tree, focused when nothing else was, as on the Run tab, showed the Maps tab)
+        self._before_dialog = (self.query_one(TabbedContent).active, self.focused)
+        self.AUTO_FOCUS = None
+
+    def on_screen_resume(self) -> None:
+        before = getattr(self, "_before_dialog", None)
+        if before is not None:
+            self.call_after_refresh(self._back_to, *before)
+
+    def _back_to(self, tab: str, widget) -> None:
+        tabs = self.query_one(TabbedContent)
+        if tabs.active != tab:
+            tabs.active = tab
+        if widget is not None and widget.is_attached and tabs.get_pane(tab) in widget.ancestors:
+            widget.focus()
+        else:
+            self._focus_tab(tab)
+
     @on(TabbedContent.TabActivated)
     def _on_tab(self, event: TabbedContent.TabActivated) -> None:
         if event.pane.id and (self.focused is None or event.pane not in self.focused.ancestors):
