@@ -872,3 +872,25 @@ async def test_a_dialog_opened_from_the_run_tab_closes_back_to_it(in_root, key):
         await pilot.pause()
         await pilot.pause()
         assert app.screen is app.main and tabs.active == "run"
+
+
+async def test_choosing_the_map_under_the_cursor_keeps_it_previewed(in_root):
+    """Space on a map in the tree chose it, and the preview (and m) jumped to the first map of
+    the selection while the cursor stayed on the one chosen."""
+    app = make_app(["run"])
+    async with app.run_test(size=(120, 40)) as pilot:
+        await ready(pilot)
+        maps = app.main.maps
+        tree = maps.query_one(MapTree)
+        tree.focus()
+        await until(pilot, lambda: any(n.data and n.data.path.name == "world.yaml"
+                                       for n in tree.root.children))
+        node = next(n for n in tree.root.children if n.data and n.data.path.name == "world.yaml")
+        tree.move_cursor(node)
+        await until(pilot, lambda: "world" in maps.previewing_label())
+        await pilot.press("space")
+        await until(pilot, lambda: any(p.name == "world.yaml" for p in maps.selected))
+        await pilot.pause(0.3)
+        assert "world" in maps.previewing_label(), maps.previewing_label()
+        maps.query_one("#selected", DataTable).focus()   # into the selection: its row's map
+        await until(pilot, lambda: "robot_1" in maps.previewing_label())

@@ -292,8 +292,18 @@ class MapsPane(Vertical):
 
     @on(DataTable.RowHighlighted)
     def _on_row_highlight(self, event: DataTable.RowHighlighted) -> None:
+        # only as the selection is walked: a change made from the tree redraws the table, and
+        # its row under the cursor took the preview from the map under the tree's cursor
+        if not event.data_table.has_focus:
+            return
         if 0 <= event.cursor_row < len(self._entries):
             self._preview(self._entries[event.cursor_row][0])
+
+    def on_descendant_focus(self, event) -> None:
+        # into the selection: the map under its cursor (the tree's was shown)
+        table = self.query_one(SelectedMaps)
+        if event.widget is table and 0 <= table.cursor_row < len(self._entries):
+            self._preview(self._entries[table.cursor_row][0])
 
     def _preview(self, path: Path) -> None:
         path = Path(path)
