@@ -146,3 +146,21 @@ async def test_the_tui_result_names_a_maps_group(two_buildings, tmp_path):
         await run_merge(pilot, {})
         table = app.main.query_one("#placements", DataTable)
         assert [str(table.get_row_at(k)[1]) for k in range(4)] == ["yes", "group 1", "yes", "group 1"]
+
+
+@pytest.mark.parametrize("method", ["map-merge", "map-merge-shipped"])
+def test_map_merges_largest_group_without_the_reference_is_a_group(two_buildings, method):
+    """A map of another building first, then two windows of one floor: map-merge's largest
+    group of matched maps is the two windows. They were reported left out with no group, and
+    fusion_order listed their join though the merged map did not hold it."""
+    one, two = two_buildings
+    result = merge([two.a, one.a, one.b], config=MergeConfig(method=method))
+    p = result.placements
+    assert [q.merged for q in p] == [True, False, False]
+    assert [q.group for q in p] == [0, 1, 1]
+    assert result.fusion_order == ()
+    d, r = placement_error(p[2].group_transform, one.truth, one.b)
+    assert d < 3 * one.a.resolution and r < math.radians(2.0)
+    assert "group 1" in p[2].reason
+    (group,) = result.groups
+    assert group.members == (1, 2)

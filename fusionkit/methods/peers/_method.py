@@ -158,6 +158,21 @@ def _peer(method: str, grids, reference: int, seed: int, emit):
         reasons = ["" if transforms[k] is not None else
                    "not in the largest group of confidently matched maps" for k in range(n)]
         groups = ([0 if t is not None else None for t in transforms], [None] * n, [0.0] * n, [])
+        keep = sorted(est.component)
+        if len(keep) >= 2 and reference not in keep:
+            # its largest group holds maps linked among themselves but not the reference: a
+            # group (placed in its first map's frame), not a merge into the reference's map
+            root = keep[0]
+            in_group = mod.estimate_maps(grids, chaining=chaining, reference=root, seed=seed)
+            tree = []
+            group_of = [0 if k == reference else 1 if k in keep else None for k in range(n)]
+            g_conf = [1.0 if k == root else float(in_group.confidences[k]) if k in keep else 0.0
+                      for k in range(n)]
+            groups = (group_of, list(in_group.transforms), g_conf, [tuple(in_group.tree)])
+            for k in keep:
+                reasons[k] = (f"its largest group of confidently matched maps does not hold the "
+                              f"reference map; it is placed in group 1 with {len(keep) - 1} "
+                              f"other map{'s' if len(keep) > 2 else ''}")
         return transforms, conf, tree, reasons, {}, groups
     accepted = {}
     todo = list(itertools.combinations(range(n), 2))
