@@ -396,7 +396,8 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
         raise InputError(f"{names[config.reference]}: the reference map has no wall (no occupied "
                          "cell), so no map can be placed in its frame; choose another map as the "
                          "reference")
-    grids = _same_resolution(list(grids), config.reference)
+    originals = list(grids)
+    grids = _same_resolution(originals, config.reference)
 
     def emit(ev: MergeEvent):
         if callback is not None and callback(ev):
@@ -412,8 +413,11 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     emit(MergeEvent("fuse", 0, 1, "fusing"))
     transforms = [p.transform for p in placed.placements]
     fused = fuse_maps(grids, transforms, order=list(placed.order), keep_steps=True)
+    # a group's map is in its first map's frame, at that map's own cell size (the maps as given,
+    # not as brought to the reference's cell size)
     groups = tuple(MapGroup(g.number, g.members, g.transforms,
-                            fuse_maps(grids, list(g.transforms), order=list(g.order)).grid)
+                            fuse_maps(originals, list(g.transforms), order=list(g.order),
+                                      resolution=originals[g.members[0]].resolution).grid)
                    for g in placed.groups)
     seconds["fuse"] = time.perf_counter() - t0
     seconds["total"] = time.perf_counter() - t_start
