@@ -429,3 +429,29 @@ def test_a_merge_of_maps_since_replaced_by_a_new_run_is_refused(tmp_path, monkey
     capsys.readouterr()
     assert main(["evaluate", "outm/m.yaml", "--truth", "w3/truth.json"]) == 2
     assert "is not the file that was merged" in capsys.readouterr().err
+
+
+def test_a_merge_with_its_own_report_name_takes_the_earlier_report_of_its_output_away(
+        tmp_path, capsys):
+    """merge -o s.yaml (report s.report.json), then merge of other maps -o s.yaml --report
+    s_new.json: s.report.json stayed, and evaluate s.yaml read it: errors of a map not in s.yaml."""
+    run_dir = tmp_path / "run"
+    assert main(["simulate", "--robots", "3", "--poses", "300", "--seed", "2", "--out",
+                 str(run_dir), "--quiet"]) == 0
+    r1, r2, r3 = (str(run_dir / f"robot_{k}.yaml") for k in (1, 2, 3))
+    out = tmp_path / "out"
+    out.mkdir()
+    main(["merge", r1, r2, "-o", str(out / "s.yaml"), "--method", "map-merge", "--quiet"])
+    assert (out / "s.report.json").is_file()
+    notes = out / "notes.json"                  # JSON, not a merge report: stays
+    notes.write_text('{"maps": "mine"}')
+    main(["merge", r1, r3, "-o", str(out / "s.yaml"), "--method", "map-merge", "--report",
+          str(out / "s_new.json"), "--quiet"])
+    assert not (out / "s.report.json").exists()
+    assert notes.is_file() and (out / "s_new.json").is_file()
+    capsys.readouterr()
+    code = main(["evaluate", str(out / "s.yaml"), "--truth", str(run_dir / "truth.json"),
+                 "--json"])
+    res = json.loads(capsys.readouterr().out)
+    assert code == 0 and res["report"].endswith("s_new.json")
+    assert [r["robot"] for r in res["maps"]] == ["robot_1", "robot_3"]

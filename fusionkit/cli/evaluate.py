@@ -48,7 +48,8 @@ def register(sub) -> None:
     p.add_argument("--report", metavar="REPORT.json",
                    help="the merge report that made MERGED.yaml (default: MERGED.report.json "
                         "beside it, else, for a group's map NAME.groupK.yaml, NAME.report.json, "
-                        "else report.json beside it, when its 'output' names MERGED.yaml or it "
+                        "else report.json beside it, else the one JSON report beside it of any "
+                        "name, when its 'output' names MERGED.yaml or it "
                         "lists it under 'group_outputs'; without one, only the map metrics are "
                         "printed, and a group's map needs --reference)")
     p.add_argument("--reference", metavar="NAME",
@@ -166,7 +167,8 @@ def find_report(merged, report=None) -> Path | None:
     """The merge report for ``merged``: ``report`` when given, else ``<stem>.report.json``
     beside it, else (for a group's map ``NAME.groupK.yaml``) ``NAME.report.json``, else
     ``report.json`` beside it, each only when its ``output`` names ``merged`` (same file name)
-    or it lists ``merged`` under ``group_outputs``; ``None`` when there is none."""
+    or it lists ``merged`` under ``group_outputs``; else the one merge report beside it (any
+    name) that does; ``None`` when there is none, or more than one."""
     merged = Path(merged)
     if report is not None:
         return Path(report)
@@ -183,7 +185,12 @@ def find_report(merged, report=None) -> Path | None:
                     (isinstance(doc.get("output"), str) and _names_merged(doc, merged))
                     or _group_of(doc, merged) is not None):
                 return cand
-    return None
+    # a report of another name (merge --report R.json): the one report beside it that names it
+    from ..mapio import merge_reports
+
+    named = [q for q, doc in merge_reports(merged.parent)
+             if _names_merged(doc, merged) or _group_of(doc, merged) is not None]
+    return named[0] if len(named) == 1 else None
 
 
 def _map_of(truth: Truth, name: str) -> Path:

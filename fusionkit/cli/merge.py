@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -117,7 +118,7 @@ def write_result(result, inputs, out, report_path, *, guard=None, output_name=No
     (``guard``, :meth:`OutputGuard.of` the inputs when not given). The report names the output
     ``output_name`` (default ``out``) and the inputs as given. Returns the group maps' paths.
     """
-    from ..mapio import group_map_files, map_digest, save_maps
+    from ..mapio import group_map_files, map_digest, merge_reports, save_maps
     from ..pipeline import group_output_paths
 
     out = Path(out)
@@ -126,6 +127,11 @@ def write_result(result, inputs, out, report_path, *, guard=None, output_name=No
     group_files = group_paths + [q.with_suffix(".pgm") for q in group_paths]
     new = set(group_files)
     stale = [q for q in group_map_files(out) if q not in new]
+    # a report of an earlier merge into ``out`` under another name (the default one, when this
+    # merge gives --report) describes a map this one replaces: evaluate took it for this one's
+    stale += [q for q, doc in merge_reports(out.parent)
+              if Path(str(doc["output"])).name == out.name
+              and os.path.realpath(q) != os.path.realpath(report_path)]
     guard.check([out, out.with_suffix(".pgm"), report_path, *group_files, *stale])
     report = result.report([str(p) for p in inputs], output=str(out if output_name is None else output_name))
     for entry, path in zip(report["maps"], inputs):   # which files were merged, for evaluate
