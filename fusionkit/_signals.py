@@ -19,13 +19,16 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-__all__ = ["Terminated", "install", "deferred", "pending", "EXIT_SIGINT", "EXIT_SIGTERM"]
+__all__ = ["Terminated", "HungUp", "install", "deferred", "pending", "signal_of", "exit_status",
+           "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_SIGHUP"]
 
-#: Exit statuses of a command stopped by SIGINT (Ctrl-C) and SIGTERM (128 + signal number).
+#: Exit statuses of a command stopped by SIGINT (Ctrl-C), SIGTERM and SIGHUP (a closed
+#: terminal, a dropped SSH link) (128 + signal number).
 EXIT_SIGINT = 130
 EXIT_SIGTERM = 143
+EXIT_SIGHUP = 129
 
-_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+_SIGNALS = (signal.SIGINT, signal.SIGTERM) + ((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ())
 _pending: list[int] = []
 _deferring = 0
 
@@ -34,13 +37,32 @@ class Terminated(KeyboardInterrupt):
     """The process received SIGTERM; unwinds like Ctrl-C (so cleanup code runs) and exits 143."""
 
 
+class HungUp(Terminated):
+    """The process received SIGHUP (its terminal closed, an SSH link dropped); unwinds as
+    SIGTERM does and exits 129."""
+
+
 def _raise(signum, frame):  # noqa: ARG001 (signal handler signature)
     if _deferring:
         _pending.append(signum)
         return
     if signum == signal.SIGTERM:
         raise Terminated()
+    if signum == getattr(signal, "SIGHUP", None):
+        raise HungUp()
     raise KeyboardInterrupt()
+
+
+def signal_of(exc: KeyboardInterrupt) -> int:
+    """The signal an interrupt raised by :func:`install`'s handlers stands for."""
+    return (signal.SIGHUP if isinstance(exc, HungUp) else
+            signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
+
+
+def exit_status(exc: KeyboardInterrupt) -> int:
+    """The exit status of a command that ``exc`` stopped: 129, 130 or 143."""
+    return (EXIT_SIGHUP if isinstance(exc, HungUp) else
+            EXIT_SIGTERM if isinstance(exc, Terminated) else EXIT_SIGINT)
 
 
 #: Seconds before a signal whose exception was swallowed is sent again.
@@ -59,8 +81,7 @@ def _unraisable(hook):
         exc = info.exc_value
         if isinstance(exc, KeyboardInterrupt) and all(signal.getsignal(s) is _raise
                                                       for s in _SIGNALS):
-            signum = signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT
-            threading.Timer(_AGAIN_S, os.kill, (os.getpid(), signum)).start()
+            threading.Timer(_AGAIN_S, os.kill, (os.getpid(), signal_of(exc))).start()
             return
         hook(info)
     unraisable.installed = True

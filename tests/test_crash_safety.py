@@ -361,10 +361,12 @@ def earlier_run(tmp_path_factory):
 @pytest.mark.parametrize("k, how, code", [(0, "SIGINT", 130), (0, "SIGTERM", 143),
                                           (6, "SIGTERM", 143), (9, "SIGINT", 130),
                                           (-1, "SIGINT", 130), (-1, "SIGTERM", 143),
-                                          (-2, "SIGTERM", 143)],
+                                          (-2, "SIGTERM", 143), (0, "SIGHUP", 129),
+                                          (6, "SIGHUP", 129)],
                          ids=["SIGINT computing", "SIGTERM computing", "SIGTERM mid-commit",
                               "SIGINT mid-commit", "SIGINT in a ctypes callback",
-                              "SIGTERM in a ctypes callback", "SIGTERM in a compiled function"])
+                              "SIGTERM in a ctypes callback", "SIGTERM in a compiled function",
+                              "SIGHUP computing", "SIGHUP mid-commit"])
 def test_a_signalled_command_exits_130_or_143_with_one_line_and_its_outputs_unchanged(
         earlier_run, k, how, code):
     before = _files(earlier_run)
@@ -376,7 +378,7 @@ def test_a_signalled_command_exits_130_or_143_with_one_line_and_its_outputs_unch
     assert proc.returncode == code, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    assert lines[0].startswith("fusionkit simulate: " + ("terminated" if how == "SIGTERM" else "interrupted"))
+    assert lines[0].startswith("fusionkit simulate: " + ("interrupted" if how == "SIGINT" else "terminated"))
     assert _files(earlier_run) == before
 
 

@@ -204,7 +204,7 @@ def _interrupted(command: str, argv, exc: KeyboardInterrupt) -> int:
     else:
         _say(f"{command}: {'terminated' if term else 'interrupted'}; no output was left "
              f"half-written")
-    return _signals.EXIT_SIGTERM if term else _signals.EXIT_SIGINT
+    return _signals.exit_status(exc)
 
 
 def _innermost(parser: argparse.ArgumentParser, args, argv, extra) -> argparse.ArgumentParser:
@@ -240,7 +240,8 @@ def _quiet_signals() -> None:
     """Ignore further Ctrl-C / SIGTERM while the process exits (no second traceback)."""
     import signal
 
-    for s in (signal.SIGINT, signal.SIGTERM):
+    for s in (signal.SIGINT, signal.SIGTERM) + ((signal.SIGHUP,) if hasattr(signal, "SIGHUP")
+                                                else ()):
         try:
             signal.signal(s, signal.SIG_IGN)
         except (ValueError, OSError):
