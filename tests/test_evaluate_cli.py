@@ -455,3 +455,16 @@ def test_a_merge_with_its_own_report_name_takes_the_earlier_report_of_its_output
     res = json.loads(capsys.readouterr().out)
     assert code == 0 and res["report"].endswith("s_new.json")
     assert [r["robot"] for r in res["maps"]] == ["robot_1", "robot_3"]
+
+
+def test_merge_takes_its_reference_however_its_path_is_written(tmp_path, monkeypatch, capsys):
+    """--reference ./robot_2.yaml for a map given as robot_2.yaml was 'not one of the maps
+    given'."""
+    run_dir = tmp_path / "run"
+    assert main(["simulate", "--robots", "2", "--poses", "300", "--seed", "3", "--out",
+                 str(run_dir), "--quiet"]) == 0
+    monkeypatch.chdir(run_dir)
+    code = main(["merge", "robot_1.yaml", "robot_2.yaml", "-o", str(tmp_path / "m.yaml"),
+                 "--method", "map-merge", "--reference", "./robot_2.yaml", "--quiet"])
+    assert code in (0, 3), capsys.readouterr().err
+    assert json.loads((tmp_path / "m.report.json").read_text())["reference"] == "robot_2.yaml"

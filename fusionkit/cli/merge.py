@@ -67,9 +67,12 @@ def run(args) -> int:
     guard.check([out, image_path, report_path])
     reference = 0
     if args.reference is not None:
-        if args.reference not in inputs:
+        # the same file however it is written (./B.yaml for B.yaml, an absolute path)
+        same = [k for k, m in enumerate(inputs)
+                if os.path.realpath(m) == os.path.realpath(args.reference)]
+        if not same:
             raise InputError(f"--reference {show(args.reference, 200)} is not one of the maps given")
-        reference = inputs.index(args.reference)
+        reference = same[0]
     config = merge_config_from_args(args, reference=reference)
     if args.candidates is not None:
         config = replace(config, consensus=replace(config.consensus or ConsensusConfig(),
