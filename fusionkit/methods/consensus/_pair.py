@@ -408,9 +408,10 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                   f"them, where {cfg.cross_wall:g} m is needed to fix it along them")
     elif best.rank <= 0:
         chk = best.check
-        reason = (f"best placement is contradicted: {100 * chk.score:.0f}% of the walls meet, but "
-                  f"{chk.disagreeing} wall cells miss the other map's walls and {chk.conflicts} of "
-                  f"them cross its open floor, more than the {chk.agreeing} that meet")
+        reason = (f"best placement is contradicted: {chk.agreeing} wall cells meet the other "
+                  f"map's walls ({100 * chk.score:.0f}%) and {chk.disagreeing} miss them, "
+                  f"{chk.conflicts} of those on its open floor; counting those three times, the "
+                  f"misses outweigh the walls that meet")
     elif null.usable and null.misses_too_much(best.check):
         chk = best.check
         reason = (f"best placement misses too much: {chk.agreeing} wall cells meet the other map's "
