@@ -894,3 +894,11 @@ async def test_choosing_the_map_under_the_cursor_keeps_it_previewed(in_root):
         assert "world" in maps.previewing_label(), maps.previewing_label()
         maps.query_one("#selected", DataTable).focus()   # into the selection: its row's map
         await until(pilot, lambda: "robot_1" in maps.previewing_label())
+
+
+def test_a_whole_number_settings_range_is_said_in_full():
+    """The seed's range read 'a whole number from 0 to 9.22337e+18'."""
+    from fusionkit_tui.widgets.settings_form import SETTINGS
+    seed = next(s for s in SETTINGS if s.key == "seed")
+    assert seed.allowed() == "a whole number from 0 to 9223372036854775807"
+    assert all("e+" not in s.allowed() for s in SETTINGS)

@@ -42,8 +42,13 @@ class Setting:
 
     def allowed(self) -> str:
         what = "a whole number" if self.kind == "int" else "a number"
-        lo = "" if math.isinf(self.lo) else f"{self.lo:g}"
-        hi = "" if math.isinf(self.hi) else f"{self.hi:g}"
+
+        def show(v) -> str:
+            # whole numbers in full (a seed's bound read 9.22337e+18)
+            return f"{int(v)}" if self.kind == "int" else f"{v:g}"
+
+        lo = "" if math.isinf(self.lo) else show(self.lo)
+        hi = "" if math.isinf(self.hi) else show(self.hi)
         if lo and hi:
             rng = f" from {lo} to {hi}"
         elif lo:
