@@ -373,8 +373,11 @@ async def test_cancel_stops_the_merge_and_the_app_stays_usable(in_root):
         await pilot.press("ctrl+r")
         await until(pilot, lambda: screen.run_panel.plot.series and screen.run_panel.plot.series[0][1])
         assert screen.merging
-        await pilot.press("escape")
+        screen.action_cancel()   # (escape) being cancelled: r is refused meanwhile, and it says so
+        left = str(screen.run_panel.query_one("#left").render())
+        assert "press r to run again" not in left and "once it has stopped" in left, left
         await until(pilot, lambda: not screen.merging)
+        assert "press r to run again" in str(screen.run_panel.query_one("#left").render())
         assert screen.result is None
         assert "cancelled" in str(screen.run_panel.query_one("#detail").render())
         # said on the run panel, not in a toast over the plot's axis

@@ -285,7 +285,7 @@ class MainScreen(Screen):
         if not self.merging:
             return
         self.workers.cancel_group(self, "merge")
-        self.run_panel.stopped("cancelling...")
+        self.run_panel.stopped("cancelling...", ended=False)
 
     @on(MergeProgress)
     def _on_progress(self, msg: MergeProgress) -> None:

@@ -197,8 +197,9 @@ class RunPanel(Vertical):
                               f"{ev.label}")
             after = ev.total - ev.step - 1
             what = "alignment" if self._swarm else "pair"
-            left.update(f"{what} {ev.step + 1} of {ev.total}; "
-                        f"{after} more after this, then fusion")
+            left.update(f"{what} {ev.step + 1} of {ev.total}; " +
+                        (f"{after} more after this, then fusion" if after > 0 else
+                         "fusion after this"))
         else:
             what = {"scans": "reading scans", "unique_poses": "finding unique poses (Algorithm 1)",
                     "pairing": "comparing unique poses (eq. 2)", "fuse": "fusing the placed maps"}
@@ -214,10 +215,12 @@ class RunPanel(Vertical):
         self.query_one("#detail", Static).update(summary)
         self.query_one("#left", Static).update("press 4 for the result, e to export")
 
-    def stopped(self, why: str) -> None:
-        """The merge was cancelled or failed: say so, keep the plot as it was."""
+    def stopped(self, why: str, *, ended: bool = True) -> None:
+        """The merge was cancelled or failed: say so, keep the plot as it was. ``ended`` False:
+        it is being cancelled (until it stops, another run cannot start)."""
         self.query_one("#stages", Static).update(self._stages(self._stage or self._stage_list[0][0],
                                                               *self._where,
                                                               stopped=True))
         self.query_one("#detail", Static).update(Text(why, style="bold"))
-        self.query_one("#left", Static).update("press r to run again")
+        self.query_one("#left", Static).update("press r to run again" if ended else
+                                               "r runs again once it has stopped")
