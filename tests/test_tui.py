@@ -905,3 +905,16 @@ def test_a_whole_number_settings_range_is_said_in_full():
     seed = next(s for s in SETTINGS if s.key == "seed")
     assert seed.allowed() == "a whole number from 0 to 9223372036854775807"
     assert all("e+" not in s.allowed() for s in SETTINGS)
+
+
+async def test_v_before_any_merge_says_why_it_does_nothing(in_root):
+    """v (Colours) on the Result tab before a merge, or without colour, did nothing, silently."""
+    app = make_app(["run"])
+    async with app.run_test(size=(100, 30)) as pilot:
+        await ready(pilot)
+        await pilot.press("4")
+        await pilot.pause()
+        app.main.query_one("#placements", DataTable).focus()
+        await pilot.press("v")
+        await pilot.pause()
+        assert any("no merged map yet" in n.message for n in app._notifications)

@@ -206,5 +206,13 @@ class ResultPanel(Vertical):
 
     def action_toggle_view(self) -> None:
         """Switch the fused map between robot colours and plain states."""
+        # said, not silently nothing
+        if self._result is None:
+            self.notify("no merged map yet: press r to merge the maps", severity="warning")
+            return
+        if getattr(self.app, "no_color", False):
+            self.notify("without colour (NO_COLOR) the fused map shows its states only",
+                        severity="warning")
+            return
         self._by_robot = not self._by_robot
         self._draw_map()
