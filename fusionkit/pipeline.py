@@ -307,6 +307,20 @@ def _once(paths) -> None:
             same = "" if os.fspath(paths[first]) == os.fspath(p) else f" (as {paths[first]})"
             raise InputError(f"{p}: the same map file is given twice{same}, as maps {first + 1} "
                              f"and {k + 1}; give each map once")
+    # two YAML files naming one image are one map (merged with itself, it is placed on itself)
+    from .mapio import _protected
+
+    images: dict = {}
+    for k, p in enumerate(paths):
+        for image in _protected([p])[1:]:
+            try:
+                st = os.stat(image)
+            except OSError:
+                continue
+            first = images.setdefault((st.st_dev, st.st_ino), k)
+            if first != k:
+                raise InputError(f"{p} and {paths[first]} (maps {first + 1} and {k + 1}) name "
+                                 f"the same image {image}: they are one map; give it once")
 
 
 def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid]:

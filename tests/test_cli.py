@@ -190,6 +190,13 @@ def test_a_map_given_twice_is_refused_in_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.splitlines()
         assert len(err) == 1 and "given twice" in err[0] and "maps 1 and 3" in err[0], err
         assert not (tmp_path / "m.yaml").exists()
+    # two YAML files naming one image: one map too (they were merged, each on the other)
+    (tmp_path / "c.yml").write_text((tmp_path / "a.yaml").read_text())
+    assert main(["merge", str(tmp_path / "a.yaml"), str(tmp_path / "c.yml"), "-o",
+                 str(tmp_path / "m.yaml")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "name the same image" in err[0] and "give it once" in err[0], err
+    assert not (tmp_path / "m.yaml").exists()
 
 
 def test_a_merge_never_writes_over_the_ground_truth_of_the_inputs_run(tmp_path, capsys):
