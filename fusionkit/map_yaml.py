@@ -57,6 +57,19 @@ def _safe_yaml(raw: bytes):
                     None, None, "an alias (*name); write the value out instead", mark)
             return super().compose_node(parent, index)
 
+        def construct_mapping(self, node, deep=False):
+            # a key given twice: PyYAML keeps the last value, map_server's reader may keep
+            # another; which one the map means is not for a reader to guess
+            seen = set()
+            for key_node, _ in node.value:
+                key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
+                if key is not None and key in seen:
+                    raise yaml.constructor.ConstructorError(
+                        None, None, f"the key {key!r} is given twice; keep one",
+                        key_node.start_mark)
+                seen.add(key)
+            return super().construct_mapping(node, deep=deep)
+
     loader = NoAliasLoader(raw)
     try:
         return loader.get_single_data()
