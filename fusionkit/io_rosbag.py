@@ -192,16 +192,37 @@ def _bag_path(path) -> Path:
 
 
 def _bag_files(path) -> list[Path]:
-    """The bag and, for a ROS 2 bag folder, every file in it (all are inputs, never outputs)."""
+    """The bag and, for a ROS 2 bag folder, the files of the bag in it (inputs, never outputs):
+    its metadata.yaml, its storage files (``.db3``, ``.mcap``, with their journals) and every
+    file the metadata names. Other files in the folder, such as an earlier import written
+    there, are not the bag's."""
     p = Path(path)
     files = [p]
     folder = p if p.is_dir() else (p.parent if p.suffix in (".db3", ".mcap") else None)
     if folder is not None and (folder / "metadata.yaml").is_file():
         try:
-            files += [folder / n for n in os.listdir(folder)]
+            names = os.listdir(folder)
         except OSError:
-            pass
+            names = []
+        files += [folder / n for n in names if n == "metadata.yaml"
+                  or re.search(r"\.(db3|mcap)(-shm|-wal|-journal)?$", n)]
+        files += [folder / n for n in _listed_in_metadata(folder / "metadata.yaml")]
     return files
+
+
+def _listed_in_metadata(metadata: Path) -> list[str]:
+    """The file names a ROS 2 bag's metadata.yaml lists (``relative_file_paths``, ``files``);
+    none when it cannot be read."""
+    from .map_yaml import _safe_yaml
+
+    try:
+        doc = _safe_yaml(metadata.read_bytes()[: 1 << 22])
+        info = doc.get("rosbag2_bagfile_information", {}) if isinstance(doc, dict) else {}
+        named = list(info.get("relative_file_paths") or [])
+        named += [f.get("path") for f in info.get("files") or [] if isinstance(f, dict)]
+    except Exception:  # noqa: BLE001 - an unreadable metadata.yaml is said by the reader
+        return []
+    return [n for n in named if isinstance(n, str) and n and "\x00" not in n]
 
 
 def _reader_errors():

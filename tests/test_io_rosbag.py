@@ -415,3 +415,21 @@ def test_a_file_of_random_bytes_is_refused_without_echoing_them(tmp_path):
                       poses=PoseSource(odom_topic="/odom"))
     assert "not a readable ROS bag" in str(info.value)
     assert "\\x" not in str(info.value) and len(str(info.value)) < 300
+
+
+def test_a_bag_imported_into_its_own_folder_can_be_imported_there_again(run_dir, tmp_path):
+    """The second import, --force or not, was refused: 'this output would overwrite the input
+    .../bag/bag.yaml', its own earlier output, taken for a file of the bag."""
+    bag = tmp_path / "bag"
+    export_rosbag(run_dir, bag, fmt="ros2", storage="sqlite3")
+    source = PoseSource(odom_topic="/robot_1/odom")
+    import_rosbag(bag, bag, scan_topic="/robot_1/scan", poses=source)
+    first = (bag / "bag.yaml").read_bytes()
+    with pytest.raises(InputError, match="already exist"):
+        import_rosbag(bag, bag, scan_topic="/robot_1/scan", poses=source)
+    import_rosbag(bag, bag, scan_topic="/robot_1/scan", poses=source, overwrite=True)
+    assert (bag / "bag.yaml").read_bytes() == first
+    # the bag's own files stay inputs: an import named after one is refused
+    with pytest.raises(InputError, match="overwrite the input"):
+        import_rosbag(bag, bag, scan_topic="/robot_1/scan", poses=source, name="metadata",
+                      overwrite=True)
