@@ -468,3 +468,11 @@ def test_merge_takes_its_reference_however_its_path_is_written(tmp_path, monkeyp
                  "--method", "map-merge", "--reference", "./robot_2.yaml", "--quiet"])
     assert code in (0, 3), capsys.readouterr().err
     assert json.loads((tmp_path / "m.report.json").read_text())["reference"] == "robot_2.yaml"
+
+
+def test_a_groups_map_that_is_not_there_is_said_to_be_missing(scene, capsys):
+    """It was said to be named like a group's map with no report listing it, not missing."""
+    root, _, _ = scene
+    code, out, err = run([root / "out/merged.group2.yaml", "--truth", root / "truth.json"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "no such map file" in err, err

@@ -341,7 +341,7 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
             raise InputError(f"--reference {reference} disagrees with the report {report_path}, "
                              f"{whose} {rep['reference']} ({ref}); drop --reference")
     else:
-        if reference is None and _group_number(merged) is not None:
+        if reference is None and _group_number(merged) is not None and Path(merged).exists():
             raise InputError(f"{merged} is named like the map of a group of a merge, but no merge "
                              f"report beside it lists it under 'group_outputs', so its frame is "
                              f"unknown; give the merge report with --report, or the robot whose "
