@@ -273,7 +273,7 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
     split = split or 1
 
     if split == 1:
-        nm = check_name(name or default_name(path))
+        nm = check_name(default_name(path) if name is None else name)
         outputs = list(_outputs_for(out_dir, nm))
         check_outputs(outputs, [path], overwrite=overwrite)
         own, t = to_own_frame(log)

@@ -481,7 +481,7 @@ def import_rosbag(path, out_dir, *, scan_topic: str, poses: PoseSource, name: st
     progress : callable, optional
         ``progress(done, total, label)``.
     """
-    nm = check_name(name or default_name(path))
+    nm = check_name(default_name(path) if name is None else name)
     out_dir = check_out_dir(out_dir)
     yaml_path = out_dir / f"{nm}.yaml"
     outputs = [yaml_path, yaml_path.with_suffix(".pgm"), out_dir / f"{nm}.scans.npz"]

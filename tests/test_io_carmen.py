@@ -338,3 +338,12 @@ def test_no_return_readings_under_a_single_stray_maximum_are_found():
     assert c.stats.no_return_value == pytest.approx(51.15)
     assert 12_284 <= c.stats.no_return_readings <= 12_400
     assert not (c.scans.ranges[np.isfinite(c.scans.ranges)] >= 51.1).any()   # 51.1-51.25 m: no return
+
+
+def test_an_empty_name_is_refused_not_replaced(tmp_path, capsys):
+    """--name '' fell back to the log's name, silently."""
+    from fusionkit.cli import main
+    assert main(["import", "carmen", str(INTEL), "--out", str(tmp_path / "o"), "--name", ""]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "map name ''" in err, err
+    assert not (tmp_path / "o").exists()
