@@ -918,3 +918,39 @@ async def test_v_before_any_merge_says_why_it_does_nothing(in_root):
         await pilot.press("v")
         await pilot.pause()
         assert any("no merged map yet" in n.message for n in app._notifications)
+
+
+@pytest.mark.parametrize("width", [80, 120])
+async def test_the_run_legend_shows_whole_entries_and_counts_those_left_out(width):
+    """Eight swarms at 80 columns: two lines ending in an entry cut off, two swarms not named
+    and nothing said of them; at 120 an entry split across the lines."""
+    from textual.app import App
+
+    from fusionkit_tui.widgets.run_panel import RunPanel
+
+    class One(App):
+        def compose(self):
+            yield RunPanel()
+
+    labels = [f"robot_{a} -> robot_{b}{s}" for a, b in ((2, 1), (3, 1), (1, 2), (5, 3))
+              for s in ("", " refine")]
+    app = One()
+    async with app.run_test(size=(width, 30)) as pilot:
+        panel = app.query_one(RunPanel)
+        for label in labels:
+            panel.plot.start(label, "#55aaff")
+        panel._legend()
+        await pilot.pause()
+        legend = app.query_one("#legend")
+        text = str(legend.render())
+    lines = text.split("\n")
+    assert len(lines) <= 2, lines
+    shown = [e.strip() for line in lines for e in line.split("━━") if e.strip()]
+    more = 0
+    if shown and shown[-1].count("+") and shown[-1].endswith("more"):
+        shown[-1], _, tail = shown[-1].rpartition("  +")
+        shown = [e for e in shown if e]
+        more = int(tail.split()[0])
+    assert all(e in labels for e in shown), shown
+    assert len(shown) + more == len(labels), (shown, more)
+    assert all(len(line) <= width for line in lines)

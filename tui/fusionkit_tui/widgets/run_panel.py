@@ -125,19 +125,49 @@ class RunPanel(Vertical):
         return text
 
     def _legend(self) -> None:
-        """One entry per line of the plot, in its colour."""
-        text = Text()
+        """One entry per line of the plot, in its colour, on at most two lines: an entry is never
+        cut in two, and those that do not fit are counted ("+3 more")."""
         no_color = bool(getattr(self.app, "no_color", False))
+        entries = []
         for k, ((label, _, _), colour) in enumerate(zip(self.plot.series, self.plot.colours)):
-            if text:
-                text.append("  ")
             if no_color:
                 mark = MONO_MARKERS[k % len(MONO_MARKERS)]
-                text.append(f"{'⠒⠒' if mark == 'braille' else mark * 2} ")
+                entries.append((f"{'⠒⠒' if mark == 'braille' else mark * 2} ", "", label))
             else:
-                text.append("━━ ", style=colour or "")
-            text.append(label)
-        self.query_one("#legend", Static).update(text)
+                entries.append(("━━ ", colour or "", label))
+        legend = self.query_one("#legend", Static)
+        width = legend.size.width or self.size.width or 80
+        lines: list[list] = [[]]
+        used = 0
+        for n, entry in enumerate(entries):
+            size = len(entry[0]) + len(entry[2]) + (2 if lines[-1] else 0)
+            if lines[-1] and used + size > width:
+                if len(lines) == 2:
+                    more = f"  +{len(entries) - n} more"
+                    while lines[-1][1:] and used + len(more) > width:   # room for the count
+                        dropped = lines[-1].pop()
+                        used -= len(dropped[0]) + len(dropped[2]) + 2
+                        n -= 1
+                    lines[-1].append(("", "", f"+{len(entries) - n} more"))
+                    break
+                lines.append([])
+                used, size = 0, size - 2
+            lines[-1].append(entry)
+            used += size
+        text = Text()
+        for i, line in enumerate(lines):
+            if i:
+                text.append("\n")
+            for j, (mark, colour, label) in enumerate(line):
+                if j:
+                    text.append("  ")
+                text.append(mark, style=colour)
+                text.append(label)
+        legend.update(text)
+
+    def on_resize(self) -> None:
+        if self.plot.series:
+            self._legend()
 
     def idle(self) -> None:
         """Before any run."""
