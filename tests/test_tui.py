@@ -954,3 +954,16 @@ async def test_the_run_legend_shows_whole_entries_and_counts_those_left_out(widt
     assert all(e in labels for e in shown), shown
     assert len(shown) + more == len(labels), (shown, more)
     assert all(len(line) <= width for line in lines)
+
+
+async def test_adding_a_folder_whose_maps_are_chosen_says_so(in_root):
+    """It said 'added 0 maps from run'."""
+    app = make_app(["run"])
+    async with app.run_test(size=(100, 30)) as pilot:
+        await ready(pilot)
+        maps = app.main.maps
+        n = len(maps.selected)
+        assert maps.add_directory(in_root / "run") == 0 and len(maps.selected) == n
+        await pilot.pause()
+        said = [m.message for m in app._notifications]
+        assert any(f"the {n} maps of" in m and "selected already" in m for m in said), said

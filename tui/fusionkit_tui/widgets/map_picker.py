@@ -241,6 +241,9 @@ class MapsPane(Vertical):
         added = len(self._entries) - before
         if not maps:
             self.notify(f"no map YAML files in {directory}", severity="warning")
+        elif not added:
+            self.notify(f"the {len(maps)} map{'s' if len(maps) != 1 else ''} of {directory} "
+                        f"{'are' if len(maps) != 1 else 'is'} selected already")
         else:
             self.notify(f"added {added} map{'s' if added != 1 else ''} from {directory}")
         return added
