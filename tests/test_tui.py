@@ -601,6 +601,10 @@ async def test_after_a_cancelled_run_export_says_the_result_is_an_earlier_one(in
         await type_setting(pilot, "particles", "4000")
         await pilot.press("ctrl+r")
         await until(pilot, lambda: screen.run_panel.plot.series and screen.run_panel.plot.series[0][1])
+        # meanwhile the Result tab says its result is the earlier one, and whose it is
+        heading = str(screen.result_panel.query_one("#fused-heading").render())
+        assert "(earlier run)" in heading and "(spectral-pso)" in heading, heading
+        assert "a merge is running" in str(screen.result_panel.query_one("#why").render())
         bar = screen.run_panel.query_one("ProgressBar")
         shown = bar.progress
         await pilot.press("escape")

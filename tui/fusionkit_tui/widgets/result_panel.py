@@ -166,15 +166,17 @@ class ResultPanel(Vertical):
         """The fused map's heading."""
         r = self._result
         merged = sum(p.merged for p in r.placements)
-        return (f"Fused map: {merged} of {len(r.placements)} maps, {r.grid.cols}x{r.grid.rows} "
-                f"cells{self._earlier}")
+        return (f"Fused map ({r.config.method}): {merged} of {len(r.placements)} maps, "
+                f"{r.grid.cols}x{r.grid.rows} cells{self._earlier}")
 
     def mark_earlier(self, why: str) -> None:
-        """Say that the result shown is an earlier one (the last run was cancelled or failed)."""
+        """Say that the result shown is an earlier one (the last run was cancelled or failed,
+        or one is running)."""
         if self._result is None:
             return
         self._earlier = " (earlier run)"
-        self.query_one("#why", Static).update(Text(why + "; e exports it, r runs again", style="bold yellow"))
+        hint = "" if why.startswith("a merge is running") else "; e exports it, r runs again"
+        self.query_one("#why", Static).update(Text(why + hint, style="bold yellow"))
         self._draw_map()
 
     def _draw_map(self) -> None:
