@@ -10,14 +10,16 @@ def add_executor_options(p, *, what: str) -> None:
     from ..executor import BACKENDS
     g = p.add_argument_group("parallel back end")
     g.add_argument("--backend", choices=BACKENDS, default=None,
-                   help=f"where the {what} run: inprocess (this process; the default), processes "
-                        f"(local worker processes) or dask (a Dask LocalCluster of --workers "
+                   help=f"where the {what} run: inprocess (this process; the default without "
+                        f"--workers), processes (local worker processes; the default with "
+                        f"--workers) or dask (a Dask LocalCluster of --workers "
                         f"processes, or the cluster of --scheduler). Results are the same on "
                         f"every back end")
     g.add_argument("--workers", type=int_range(1, 1024), default=None, metavar="N",
-                   help=f"run the {what} on N workers (processes; with --backend inprocess, N "
-                        f"threads of this process; with --backend dask, a Dask LocalCluster of N "
-                        f"processes on this machine)")
+                   help=f"run the {what} on N workers: N local processes (without --backend, or "
+                        f"with --backend processes), N threads of this process (--backend "
+                        f"inprocess) or a Dask LocalCluster of N processes on this machine "
+                        f"(--backend dask)")
     g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                    help=f"run the {what} on the Dask cluster whose scheduler is at this address "
                         f"(its workers need fusionkit installed)")
