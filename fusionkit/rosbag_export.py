@@ -260,7 +260,12 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
     robots = _run_robots(run_dir)
 
     _sweep_dead_exports(parent, out.name)
-    tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".tmp", dir=parent))
+    try:
+        tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".tmp",
+                                       dir=parent))
+    except OSError as exc:   # said of the output asked for, not of the temporary folder
+        raise InputError(f"{out}: cannot write in {parent} ({exc.strerror or exc}); check the "
+                         f"path and its permissions") from None
     try:
         tmp = tmpdir / out.name
         try:

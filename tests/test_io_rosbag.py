@@ -433,3 +433,11 @@ def test_a_bag_imported_into_its_own_folder_can_be_imported_there_again(run_dir,
     with pytest.raises(InputError, match="overwrite the input"):
         import_rosbag(bag, bag, scan_topic="/robot_1/scan", poses=source, name="metadata",
                       overwrite=True)
+
+
+def test_an_export_into_a_folder_it_cannot_write_names_the_output_not_a_temporary(run_dir, capsys):
+    """It said '/proc/.x_bag.20112.xezcuhzk.tmp': No such file or directory."""
+    from fusionkit.cli import main
+    assert main(["export", "rosbag", str(run_dir), "--out", "/proc/x_bag"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "/proc/x_bag:" in err and ".tmp" not in err, err
