@@ -187,8 +187,12 @@ class SpectralPSO:
                     placed, key=lambda p: (_pair(agreements, p, new).count, -p))
                 accepted_order.append((onto, new))
             else:
-                reasons[new] = (f"best alignment agrees on {100 * score:.0f}% of {cells} overlapping "
-                                f"wall cells (needs {100 * config.accept:.0f}% of >= {config.min_overlap_cells})")
+                # as many digits as tell the share from the threshold (69.96% read "70%, needs 70%")
+                digits = next((d for d in range(4) if f"{100 * score:.{d}f}"
+                               != f"{100 * config.accept:.{d}f}"), 0)
+                reasons[new] = (f"best alignment agrees on {100 * score:.{digits}f}% of {cells} "
+                                f"overlapping wall cells (needs {100 * config.accept:.{digits}f}% "
+                                f"of >= {config.min_overlap_cells})")
         seconds["align"] = time.perf_counter() - t0
 
         # express everything in the reference map's frame
