@@ -117,6 +117,9 @@ def _read_yaml(yaml_path: Path) -> _MapYaml:
     image_path = Path(image.strip())
     if not image_path.is_absolute():
         image_path = yaml_path.parent / image_path
+    if image_path.is_dir():   # said of the YAML that names it ('image: .')
+        raise MapFormatError(f"{_short(yaml_path)}: 'image' names the folder {show(image)}, "
+                             f"not a map image; fix the 'image' key")
 
     resolution = _number(doc["resolution"], "resolution", yaml_path)
     lo, hi = _RESOLUTION_RANGE
