@@ -971,3 +971,16 @@ async def test_adding_a_folder_whose_maps_are_chosen_says_so(in_root):
         await pilot.pause()
         said = [m.message for m in app._notifications]
         assert any(f"the {n} maps of" in m and "selected already" in m for m in said), said
+
+
+async def test_removing_from_an_empty_selection_says_why_nothing_happens(tmp_path, monkeypatch):
+    """x (or f) with no map selected did nothing, silently."""
+    monkeypatch.chdir(tmp_path)
+    app = make_app([str(tmp_path)])
+    async with app.run_test(size=(100, 30)) as pilot:
+        await pilot.pause(0.5)
+        table = app.main.maps.query_one("#selected", DataTable)
+        table.focus()
+        await pilot.press("x")
+        await pilot.pause()
+        assert any("no map is selected" in n.message for n in app._notifications)

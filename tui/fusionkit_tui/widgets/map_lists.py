@@ -156,7 +156,13 @@ class SelectedMaps(DataTable):
     def action_remove(self) -> None:
         if self.row_count:
             self.post_message(self.Remove(self.cursor_row))
+        else:   # said, not silently nothing
+            self.notify("no map is selected: choose one in the tree with space or enter (a adds a "
+                        "whole folder)")
 
     def action_reference(self) -> None:
         if self.row_count:
             self.post_message(self.MakeReference(self.cursor_row))
+        else:
+            self.notify("no map is selected: choose one in the tree with space or enter (a adds a "
+                        "whole folder)")
