@@ -192,10 +192,9 @@ def _bag_path(path) -> Path:
 
 
 def _bag_files(path) -> list[Path]:
-    """The bag and, for a ROS 2 bag folder, the files of the bag in it (inputs, never outputs):
-    its metadata.yaml, its storage files (``.db3``, ``.mcap``, with their journals) and every
-    file the metadata names. Other files in the folder, such as an earlier import written
-    there, are not the bag's."""
+    """The bag and, for a ROS 2 bag folder, its files (inputs, never outputs): metadata.yaml,
+    the storage files (``.db3``, ``.mcap``, their journals) and what the metadata names; not
+    other files in the folder, such as an earlier import written there."""
     p = Path(path)
     files = [p]
     folder = p if p.is_dir() else (p.parent if p.suffix in (".db3", ".mcap") else None)
@@ -211,10 +210,8 @@ def _bag_files(path) -> list[Path]:
 
 
 def _listed_in_metadata(metadata: Path) -> list[str]:
-    """The file names a ROS 2 bag's metadata.yaml lists (``relative_file_paths``, ``files``);
-    none when it cannot be read."""
+    """The file names a ROS 2 bag's metadata.yaml lists (none when it cannot be read)."""
     from .map_yaml import _safe_yaml
-
     try:
         doc = _safe_yaml(metadata.read_bytes()[: 1 << 22])
         info = doc.get("rosbag2_bagfile_information", {}) if isinstance(doc, dict) else {}

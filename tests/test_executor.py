@@ -241,6 +241,19 @@ def test_progress_bar_shows_rate_and_time_left_on_a_terminal_only():
     assert format_duration(3723) == "1:02:03"
 
 
+def _group_gone(pgid: int, seconds: float = 10.0) -> bool:
+    """Whether every process of the group ``pgid`` has ended within ``seconds``."""
+    import os
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            os.killpg(pgid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.1)
+    return False
+
+
 def test_ctrl_c_at_the_terminal_stops_a_dask_run_with_one_line(tmp_path):
     """Ctrl-C at a terminal reaches every process of its group, the cluster's workers too: the
     run ends with its one line and exit 130, no worker's traceback or warning, no worker left."""
@@ -260,14 +273,7 @@ def test_ctrl_c_at_the_terminal_stops_a_dask_run_with_one_line(tmp_path):
         os.killpg(proc.pid, signal.SIGINT)
         rest = proc.stderr.read()
         assert proc.wait(timeout=60) == 130
-        left = True
-        for _ in range(100):  # the workers go with the cluster, closed on the way out
-            try:
-                os.killpg(proc.pid, 0)
-            except ProcessLookupError:
-                left = False
-                break
-            time.sleep(0.1)
+        left = not _group_gone(proc.pid)   # the workers go with the cluster, closed on the way out
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
@@ -302,14 +308,7 @@ def test_ctrl_c_while_the_dask_cluster_starts_stops_the_run(tmp_path):
                             text=True, start_new_session=True, env=env)
     try:
         err = proc.communicate(timeout=120)[1]
-        left = True
-        for _ in range(100):  # the workers go with the cluster, closed on the way out
-            try:
-                os.killpg(proc.pid, 0)
-            except ProcessLookupError:
-                left = False
-                break
-            time.sleep(0.1)
+        left = not _group_gone(proc.pid)   # the workers go with the cluster, closed on the way out
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)

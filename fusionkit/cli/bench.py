@@ -107,10 +107,10 @@ def run(args) -> int:
     progress = ProgressBar("bench", unit="cases", enabled=False if args.quiet else None)
     if not args.folders and not args.quiet:
         # the default folders are relative to where the command runs: say what was found
-        progress.note("no folder given: the maps of " + " and ".join(f"./{f}" for f in folders)
-                      + ", and the built-in worlds" if folders else
-                      "no folder given, and no ./maps or ./maps/real here: the built-in worlds "
-                      "only (give folders of maps to bench on them)")
+        print("no folder given: the maps of " + " and ".join(f"./{f}" for f in folders)
+              + ", and the built-in worlds" if folders else
+              "no folder given, and no ./maps or ./maps/real here: the built-in worlds only "
+              "(give folders of maps to bench on them)", flush=True)
     command = "fusionkit bench " + " ".join(shlex.quote(a) for a in sys.argv[2:]) \
         if len(sys.argv) > 1 and sys.argv[1] == "bench" else ""
     with executor_from_args(args, jobs=args.jobs) as executor:

@@ -98,6 +98,11 @@ class MapTree(DirectoryTree):
             self.path = here.parent
 
 
+#: What x and f say with no map selected
+_NONE_SELECTED = ("no map is selected: choose one in the tree with space or enter (a adds a "
+                  "whole folder)")
+
+
 class SelectedMaps(DataTable):
     """The chosen maps, in merge order; the first is the reference."""
 
@@ -157,12 +162,10 @@ class SelectedMaps(DataTable):
         if self.row_count:
             self.post_message(self.Remove(self.cursor_row))
         else:   # said, not silently nothing
-            self.notify("no map is selected: choose one in the tree with space or enter (a adds a "
-                        "whole folder)")
+            self.notify(_NONE_SELECTED)
 
     def action_reference(self) -> None:
         if self.row_count:
             self.post_message(self.MakeReference(self.cursor_row))
         else:
-            self.notify("no map is selected: choose one in the tree with space or enter (a adds a "
-                        "whole folder)")
+            self.notify(_NONE_SELECTED)
