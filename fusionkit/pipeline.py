@@ -319,7 +319,7 @@ def _once(paths) -> None:
                 continue
             first = images.setdefault((st.st_dev, st.st_ino), k)
             if first != k:
-                raise InputError(f"{p} and {paths[first]} (maps {first + 1} and {k + 1}) name "
+                raise InputError(f"{paths[first]} and {p} (maps {first + 1} and {k + 1}) name "
                                  f"the same image {image}: they are one map; give it once")
 
 

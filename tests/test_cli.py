@@ -196,6 +196,7 @@ def test_a_map_given_twice_is_refused_in_one_line(tmp_path, capsys):
                  str(tmp_path / "m.yaml")]) == 2
     err = capsys.readouterr().err.splitlines()
     assert len(err) == 1 and "name the same image" in err[0] and "give it once" in err[0], err
+    assert f"{tmp_path / 'a.yaml'} and {tmp_path / 'c.yml'} (maps 1 and 2)" in err[0], err
     assert not (tmp_path / "m.yaml").exists()
 
 
