@@ -26,15 +26,15 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
-import logging
 import multiprocessing
 import os
 import signal
 import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolExecutor, wait
-from typing import Any, Callable, Iterator, Sequence
+from typing import Iterator
 
 from . import _signals
+from ._executor_base import Executor, worker_setup
 from .errors import InputError
 
 __all__ = ["Executor", "InProcess", "LocalProcesses", "DaskExecutor", "make_executor", "using",
@@ -43,67 +43,8 @@ __all__ = ["Executor", "InProcess", "LocalProcesses", "DaskExecutor", "make_exec
 #: Back-end names accepted by :func:`make_executor`.
 BACKENDS = ("inprocess", "processes", "dask")
 
-Progress = Callable[[int, int], None]
-
-
-def worker_setup() -> None:
-    """Run once in every worker process: one thread per worker for numba and OpenCV, so that
-    workers sharing the cores do not oversubscribe them (results do not depend on it)."""
-    global _SET_UP
-    if _SET_UP:
-        return
-    _SET_UP = True
-    import cv2
-    import numba
-    numba.set_num_threads(1)
-    cv2.setNumThreads(1)
-
-
-_SET_UP = False
 # per worker process: shared data by token (LocalProcesses sets it in the pool's initializer)
 _SHARED: dict = {}
-
-
-class Executor:
-    """Runs ``fn(shared, task)`` for every task and returns the results in task order.
-
-    Attributes
-    ----------
-    name : str
-        Back-end name (one of :data:`BACKENDS`).
-    workers : int
-        Tasks run at once.
-    """
-
-    name = "executor"
-    workers = 1
-
-    def map(self, fn: Callable[[Any, Any], Any], tasks: Sequence, *, shared: Any = None,
-            progress: Progress | None = None) -> list:
-        """``[fn(shared, t) for t in tasks]``, run on this back end.
-
-        ``progress(done, total)`` is called in the calling thread as tasks finish. An exception
-        raised by a task is raised here.
-        """
-        raise NotImplementedError
-
-    @property
-    def dashboard(self) -> str | None:
-        """Address of a live dashboard, or None."""
-        return None
-
-    def describe(self) -> str:
-        """One line for the terminal: back end, workers, and dashboard where there is one."""
-        return f"{self.name}: {self.workers} worker{'s' if self.workers != 1 else ''}"
-
-    def close(self) -> None:
-        """Release workers and connections (idempotent)."""
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
 
 def _ordered(submit, tasks, progress, workers) -> list:
@@ -265,197 +206,12 @@ class LocalProcesses(Executor):
             self._pool_shared = None
 
 
-def _answers(url: str, timeout: float = 2.0) -> bool:
-    """Whether ``url`` answers an HTTP GET with a page (not 404)."""
-    import urllib.error
-    import urllib.request
-
-    try:
-        with urllib.request.urlopen(url, timeout=timeout) as r:   # noqa: S310 - the user's scheduler
-            return 200 <= r.status < 400
-    except (urllib.error.URLError, OSError, ValueError):
-        return False
-
-
-class _NotCancelled(logging.Filter):
-    """Drops a Dask worker's warning that a task ended cancelled: a run stopped by Ctrl-C
-    cancels the tasks in flight on purpose, and its one line says so."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return "CancelledError" not in record.getMessage()
-
-
-def _dask_call(fn, shared, task):
-    worker_setup()
-    log = logging.getLogger("distributed.worker.state_machine")
-    if not any(isinstance(f, _NotCancelled) for f in log.filters):
-        log.addFilter(_NotCancelled())
-    return fn(shared, task)
-
-
-class DaskExecutor(Executor):
-    """Tasks on a ``dask.distributed`` cluster.
-
-    Parameters
-    ----------
-    workers : int, optional
-        Start a ``LocalCluster`` of this many worker processes (one thread each) on the
-        loopback interface.
-    address : str, optional
-        Connect to the scheduler at ``tcp://HOST:PORT`` instead (its workers must have the same
-        fusionkit installed).
-    timeout : float
-        Seconds to wait for the scheduler to answer.
-    dashboard : bool
-        Serve the dashboard of a ``LocalCluster`` (on a free port; needs ``bokeh``).
-
-    Raises
-    ------
-    InputError
-        Dask is not installed, or the scheduler does not answer within ``timeout``.
-    """
-
-    name = "dask"
-
-    def __init__(self, workers: int | None = None, *, address: str | None = None,
-                 timeout: float = 10.0, dashboard: bool = True):
-        if (workers is None) == (address is None):
-            raise InputError("give the Dask back end either a number of workers or a scheduler address")
-        try:
-            import dask  # noqa: F401
-            from distributed import Client, LocalCluster
-        except ImportError:
-            raise InputError("the Dask back end needs dask and distributed: "
-                             "pip install 'fusionkit[dask]'") from None
-        self._cluster = None
-        self._answered: dict = {}   # dashboard link -> whether it serves pages
-        self._client = None
-        self._dashboard = False
-        self._shared = None
-        self._shared_of = None
-        if address is not None:
-            if not isinstance(address, str) or "://" not in address:
-                raise InputError(f"scheduler address {address!r}: give it as tcp://HOST:PORT")
-            try:
-                self._client = Client(address, timeout=f"{float(timeout)}s", set_as_default=False)
-            except (OSError, TimeoutError) as exc:
-                raise InputError(f"no Dask scheduler answered at {address} within {timeout:g} s "
-                                 f"({type(exc).__name__}); check the address and that the "
-                                 f"scheduler is running") from None
-            try:
-                self._client.wait_for_workers(1, timeout=float(timeout))
-            except (OSError, TimeoutError):
-                self.close()
-                raise InputError(f"the Dask scheduler at {address} has no workers (waited "
-                                 f"{timeout:g} s); start some with dask worker {address}") from None
-            self.workers = max(1, sum(w.get("nthreads", 1) for w in
-                                      self._client.scheduler_info().get("workers", {}).values()))
-            self._dashboard = True
-        else:
-            if not isinstance(workers, int) or workers < 1:
-                raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
-            self.workers = workers
-            if dashboard:
-                try:
-                    import bokeh  # noqa: F401
-                except ImportError:
-                    dashboard = False
-            # everything on the loopback interface, on free ports (the scheduler's small HTTP
-            # server too, which serves the dashboard when asked for and bokeh is installed)
-            # a Ctrl-C at the terminal reaches every process of its group: this process (its
-            # handler kept while the cluster starts), not each worker, stops the run and closes
-            # the cluster; the workers ignore it from their first import on (_dask_worker)
-            try:
-                self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
-                                             processes=True, host="127.0.0.1",
-                                             dashboard_address="127.0.0.1:0",
-                                             worker_dashboard_address=None,
-                                             preload=["fusionkit._dask_worker"],
-                                             scheduler_kwargs={"dashboard": bool(dashboard)})
-                self._client = Client(self._cluster, set_as_default=False)
-            except BaseException:
-                self.close()
-                raise
-            self._dashboard = bool(dashboard)
-
-    @property
-    def client(self):
-        """The ``distributed.Client``."""
-        return self._client
-
-    @property
-    def dashboard(self) -> str | None:
-        if self._client is None or not self._dashboard:
-            return None
-        if "dashboard" not in self._client.scheduler_info().get("services", {}):
-            return None                                   # bokeh is not installed there
-        link = self._client.dashboard_link or None
-        if link is not None and self._cluster is None:
-            # a scheduler started elsewhere serves its HTTP port without the dashboard pages
-            # when bokeh is missing or --no-dashboard was given: asked once
-            if link not in self._answered:
-                self._answered[link] = _answers(link)
-            return link if self._answered[link] else None
-        return link
-
-    def describe(self) -> str:
-        where = self._client.scheduler.address if self._client is not None else "closed"
-        dash = self.dashboard
-        return (f"dask: {self.workers} worker{'s' if self.workers != 1 else ''} at {where}; "
-                f"dashboard: {dash if dash else 'none (install bokeh for one)'}")
-
-    def map(self, fn, tasks, *, shared=None, progress=None):
-        from distributed import as_completed
-        tasks = list(tasks)
-        total = len(tasks)
-        if progress is not None:
-            progress(0, total)
-        if not total:
-            return []
-        client = self._client
-        # the shared data goes to every worker once (and stays there for the next map with the
-        # same object); tasks refer to it
-        if shared is not self._shared_of:
-            self._drop_shared()
-            self._shared = client.scatter(shared, broadcast=True, hash=False) \
-                if shared is not None else None
-            self._shared_of = shared
-        handle = self._shared
-        futures = client.map(_dask_call, [fn] * total, [handle] * total, tasks, pure=False)
-        index = {f.key: n for n, f in enumerate(futures)}
-        out: list = [None] * total
-        done = 0
-        try:
-            for f in as_completed(futures, loop=client.loop):
-                out[index[f.key]] = f.result()
-                done += 1
-                if progress is not None:
-                    progress(done, total)
-        finally:
-            client.cancel(futures)
-        return out
-
-    def _drop_shared(self) -> None:
-        if self._shared is not None and self._client is not None:
-            self._client.cancel([self._shared])
-        self._shared = None
-        self._shared_of = None
-
-    def close(self) -> None:
-        # a worker slow to exit is killed by its nanny: expected here, not worth a warning
-        log = logging.getLogger("distributed")
-        level = log.level
-        log.setLevel(logging.ERROR)
-        try:
-            self._drop_shared()
-            if self._client is not None:
-                self._client.close()
-                self._client = None
-            if self._cluster is not None:
-                self._cluster.close()
-                self._cluster = None
-        finally:
-            log.setLevel(level)
+def __getattr__(name: str):
+    # the Dask back end is a module of its own, read only when it is used
+    if name == "DaskExecutor":
+        from ._dask import DaskExecutor
+        return DaskExecutor
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def make_executor(backend: str | None = None, *, workers: int | None = None,
@@ -468,6 +224,8 @@ def make_executor(backend: str | None = None, *, workers: int | None = None,
     """
     if backend is not None and backend not in BACKENDS:
         raise InputError(f"unknown back end {backend!r}; choose one of {', '.join(BACKENDS)}")
+    from ._dask import DaskExecutor
+
     if scheduler is not None:
         if backend not in (None, "dask"):
             raise InputError(f"--scheduler is a Dask scheduler; it cannot be used with --backend {backend}")

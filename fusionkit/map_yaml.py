@@ -118,7 +118,7 @@ def _read_yaml(yaml_path: Path) -> _MapYaml:
     if not image_path.is_absolute():
         image_path = yaml_path.parent / image_path
     if image_path.is_dir():   # said of the YAML that names it ('image: .')
-        raise MapFormatError(f"{_short(yaml_path)}: 'image' names the folder {show(image)}, "
+        raise MapFormatError(f"{_short(yaml_path)}: 'image' names the directory {show(image)}, "
                              f"not a map image; fix the 'image' key")
 
     resolution = _number(doc["resolution"], "resolution", yaml_path)

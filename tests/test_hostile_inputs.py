@@ -211,7 +211,7 @@ CASES = [
     ("yaml alias flood in origin", _merge_b(_prefix=_LAUGHS, origin="*i"), "alias"),
     ("yaml alias flood in image", _merge_b(_prefix=_LAUGHS, image="*i"), "alias"),
     ("a key given twice", _merge_b(_prefix="resolution: 0.2\n"), "'resolution' is given twice"),
-    ("a folder as the image", _merge_b(image="."), "B.yaml: 'image' names the folder"),
+    ("a folder as the image", _merge_b(image="."), "B.yaml: 'image' names the directory"),
     ("resolution 1e-300", _merge_b(resolution="1e-300"), "resolution"),
     ("resolution 1e300", _merge_b(resolution="1e300"), "resolution"),
     ("origin 1e308", _merge_b(origin="[1e308, 0, 0]"), "origin"),

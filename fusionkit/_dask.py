@@ -1,0 +1,227 @@
+"""The Dask back end of :mod:`fusionkit.executor`: a ``LocalCluster`` on this machine's loopback
+interface, or the cluster of a scheduler given by its address (the optional ``[dask]`` extra)."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+
+from .errors import InputError
+from ._executor_base import Executor, worker_setup
+
+__all__ = ["DaskExecutor"]
+
+
+def _answers(url: str, timeout: float = 2.0) -> bool:
+    """Whether ``url`` answers an HTTP GET with a page (not 404)."""
+    import urllib.error
+    import urllib.request
+
+    try:
+        with urllib.request.urlopen(url, timeout=timeout) as r:   # noqa: S310 - the user's scheduler
+            return 200 <= r.status < 400
+    except (urllib.error.URLError, OSError, ValueError):
+        return False
+
+
+class _NotCancelled(logging.Filter):
+    """Drops a Dask worker's warning that a task ended cancelled: a run stopped by Ctrl-C
+    cancels the tasks in flight on purpose, and its one line says so."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "CancelledError" not in record.getMessage()
+
+
+def _quiet_dask() -> None:
+    """Stopped by Ctrl-C or SIGTERM, the run ends with its one line: what the scheduler and
+    its event loop log of the tasks and transfers cut short (errors, tracebacks) is not said."""
+    for name in ("distributed", "asyncio", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+def _dask_call(fn, shared, task):
+    worker_setup()
+    log = logging.getLogger("distributed.worker.state_machine")
+    if not any(isinstance(f, _NotCancelled) for f in log.filters):
+        log.addFilter(_NotCancelled())
+    return fn(shared, task)
+
+
+class DaskExecutor(Executor):
+    """Tasks on a ``dask.distributed`` cluster.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Start a ``LocalCluster`` of this many worker processes (one thread each) on the
+        loopback interface.
+    address : str, optional
+        Connect to the scheduler at ``tcp://HOST:PORT`` instead (its workers must have the same
+        fusionkit installed).
+    timeout : float
+        Seconds to wait for the scheduler to answer.
+    dashboard : bool
+        Serve the dashboard of a ``LocalCluster`` (on a free port; needs ``bokeh``).
+
+    Raises
+    ------
+    InputError
+        Dask is not installed, or the scheduler does not answer within ``timeout``.
+    """
+
+    name = "dask"
+
+    def __init__(self, workers: int | None = None, *, address: str | None = None,
+                 timeout: float = 10.0, dashboard: bool = True):
+        if (workers is None) == (address is None):
+            raise InputError("give the Dask back end either a number of workers or a scheduler address")
+        try:
+            import dask  # noqa: F401
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise InputError("the Dask back end needs dask and distributed: "
+                             "pip install 'fusionkit[dask]'") from None
+        self._cluster = None
+        self._answered: dict = {}   # dashboard link -> whether it serves pages
+        self._client = None
+        self._dashboard = False
+        self._shared = None
+        self._shared_of = None
+        if address is not None:
+            if not isinstance(address, str) or "://" not in address:
+                raise InputError(f"scheduler address {address!r}: give it as tcp://HOST:PORT")
+            try:
+                self._client = Client(address, timeout=f"{float(timeout)}s", set_as_default=False)
+            except (OSError, TimeoutError) as exc:
+                raise InputError(f"no Dask scheduler answered at {address} within {timeout:g} s "
+                                 f"({type(exc).__name__}); check the address and that the "
+                                 f"scheduler is running") from None
+            try:
+                self._client.wait_for_workers(1, timeout=float(timeout))
+            except (OSError, TimeoutError):
+                self.close()
+                raise InputError(f"the Dask scheduler at {address} has no workers (waited "
+                                 f"{timeout:g} s); start some with dask worker {address}") from None
+            self.workers = max(1, sum(w.get("nthreads", 1) for w in
+                                      self._client.scheduler_info().get("workers", {}).values()))
+            self._dashboard = True
+        else:
+            if not isinstance(workers, int) or workers < 1:
+                raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
+            self.workers = workers
+            if dashboard:
+                try:
+                    import bokeh  # noqa: F401
+                except ImportError:
+                    dashboard = False
+            # everything on the loopback interface, on free ports (the scheduler's small HTTP
+            # server too, which serves the dashboard when asked for and bokeh is installed)
+            # a Ctrl-C at the terminal reaches every process of its group: this process (its
+            # handler kept while the cluster starts), not each worker, stops the run and closes
+            # the cluster; the workers ignore it from their first import on (_dask_worker)
+            from distributed.deploy.spec import SpecCluster
+            before = set(SpecCluster._instances)
+            try:
+                self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
+                                             processes=True, host="127.0.0.1",
+                                             dashboard_address="127.0.0.1:0",
+                                             worker_dashboard_address=None,
+                                             preload=["fusionkit._dask_worker"],
+                                             scheduler_kwargs={"dashboard": bool(dashboard)})
+                self._client = Client(self._cluster, set_as_default=False)
+            except BaseException as exc:
+                if isinstance(exc, KeyboardInterrupt):
+                    _quiet_dask()
+                self.close()
+                # a cluster stopped half-way through its start is closed here, not by Dask's
+                # exit hook, which fails on it with a traceback
+                for cluster in set(SpecCluster._instances) - before:
+                    with contextlib.suppress(Exception):
+                        cluster.close(timeout=10)
+                    cluster.shutdown_on_close = False
+                raise
+            self._dashboard = bool(dashboard)
+
+    @property
+    def client(self):
+        """The ``distributed.Client``."""
+        return self._client
+
+    @property
+    def dashboard(self) -> str | None:
+        if self._client is None or not self._dashboard:
+            return None
+        if "dashboard" not in self._client.scheduler_info().get("services", {}):
+            return None                                   # bokeh is not installed there
+        link = self._client.dashboard_link or None
+        if link is not None and self._cluster is None:
+            # a scheduler started elsewhere serves its HTTP port without the dashboard pages
+            # when bokeh is missing or --no-dashboard was given: asked once
+            if link not in self._answered:
+                self._answered[link] = _answers(link)
+            return link if self._answered[link] else None
+        return link
+
+    def describe(self) -> str:
+        where = self._client.scheduler.address if self._client is not None else "closed"
+        dash = self.dashboard
+        return (f"dask: {self.workers} worker{'s' if self.workers != 1 else ''} at {where}; "
+                f"dashboard: {dash if dash else 'none (install bokeh for one)'}")
+
+    def map(self, fn, tasks, *, shared=None, progress=None):
+        from distributed import as_completed
+        tasks = list(tasks)
+        total = len(tasks)
+        if progress is not None:
+            progress(0, total)
+        if not total:
+            return []
+        client = self._client
+        # the shared data goes to every worker once (and stays there for the next map with the
+        # same object); tasks refer to it
+        if shared is not self._shared_of:
+            self._drop_shared()
+            self._shared = client.scatter(shared, broadcast=True, hash=False) \
+                if shared is not None else None
+            self._shared_of = shared
+        handle = self._shared
+        futures = client.map(_dask_call, [fn] * total, [handle] * total, tasks, pure=False)
+        index = {f.key: n for n, f in enumerate(futures)}
+        out: list = [None] * total
+        done = 0
+        try:
+            for f in as_completed(futures, loop=client.loop):
+                out[index[f.key]] = f.result()
+                done += 1
+                if progress is not None:
+                    progress(done, total)
+        finally:
+            client.cancel(futures)
+        return out
+
+    def _drop_shared(self) -> None:
+        if self._shared is not None and self._client is not None:
+            self._client.cancel([self._shared])
+        self._shared = None
+        self._shared_of = None
+
+    def __exit__(self, kind, *exc):
+        if kind is not None and issubclass(kind, KeyboardInterrupt):
+            _quiet_dask()
+        self.close()
+
+    def close(self) -> None:
+        # a worker slow to exit is killed by its nanny: expected here, not worth a warning
+        log = logging.getLogger("distributed")
+        level = log.level
+        log.setLevel(logging.ERROR)
+        try:
+            self._drop_shared()
+            if self._client is not None:
+                self._client.close()
+                self._client = None
+            if self._cluster is not None:
+                self._cluster.close()
+                self._cluster = None
+        finally:
+            log.setLevel(level)

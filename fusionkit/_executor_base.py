@@ -1,0 +1,69 @@
+"""What every back end of :mod:`fusionkit.executor` shares: the :class:`Executor` interface and
+the set-up of a worker process (here so that the Dask back end, a module of its own, needs
+nothing else of :mod:`fusionkit.executor`)."""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Sequence
+
+__all__ = ["Executor", "Progress", "worker_setup"]
+
+Progress = Callable[[int, int], None]
+
+
+def worker_setup() -> None:
+    """Run once in every worker process: one thread per worker for numba and OpenCV, so that
+    workers sharing the cores do not oversubscribe them (results do not depend on it)."""
+    global _SET_UP
+    if _SET_UP:
+        return
+    _SET_UP = True
+    import cv2
+    import numba
+    numba.set_num_threads(1)
+    cv2.setNumThreads(1)
+
+
+_SET_UP = False
+
+
+class Executor:
+    """Runs ``fn(shared, task)`` for every task and returns the results in task order.
+
+    Attributes
+    ----------
+    name : str
+        Back-end name (one of :data:`BACKENDS`).
+    workers : int
+        Tasks run at once.
+    """
+
+    name = "executor"
+    workers = 1
+
+    def map(self, fn: Callable[[Any, Any], Any], tasks: Sequence, *, shared: Any = None,
+            progress: Progress | None = None) -> list:
+        """``[fn(shared, t) for t in tasks]``, run on this back end.
+
+        ``progress(done, total)`` is called in the calling thread as tasks finish. An exception
+        raised by a task is raised here.
+        """
+        raise NotImplementedError
+
+    @property
+    def dashboard(self) -> str | None:
+        """Address of a live dashboard, or None."""
+        return None
+
+    def describe(self) -> str:
+        """One line for the terminal: back end, workers, and dashboard where there is one."""
+        return f"{self.name}: {self.workers} worker{'s' if self.workers != 1 else ''}"
+
+    def close(self) -> None:
+        """Release workers and connections (idempotent)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
