@@ -984,3 +984,27 @@ async def test_removing_from_an_empty_selection_says_why_nothing_happens(tmp_pat
         await pilot.press("x")
         await pilot.pause()
         assert any("no map is selected" in n.message for n in app._notifications)
+
+
+async def test_long_map_names_leave_the_metrics_columns_in_view(in_root):
+    """With maps of two folders named by their paths, Table 1's eff column was cut off at 120
+    columns, behind a horizontal scroll bar."""
+    import shutil
+
+    other = Path("a_folder_with_a_long_name")
+    if not other.exists():
+        other.mkdir()
+        for f in ("robot_1.yaml", "robot_1.pgm", "robot_1.scans.npz"):
+            shutil.copy(Path("run") / f, other / f)
+    app = make_app(["run/robot_1.yaml", "run/robot_2.yaml", f"{other}/robot_1.yaml"])
+    async with app.run_test(size=(120, 40)) as pilot:
+        await ready(pilot)
+        await run_merge(pilot)
+        await pilot.press("4")
+        await pilot.pause()
+        metrics = app.main.result_panel.query_one("#metrics", DataTable)
+        assert metrics.row_count >= 1
+        assert metrics.virtual_size.width <= metrics.size.width, (metrics.virtual_size,
+                                                                  metrics.size)
+        labels = [str(metrics.get_row_at(k)[0]) for k in range(metrics.row_count)]
+        assert all(x.startswith("+ ") for x in labels[1:]), labels

@@ -12,6 +12,7 @@ from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.widgets import DataTable, Label, Static
 
+from fusionkit.labels import clip_left
 from fusionkit.metrics import table1_label
 
 from .map_preview import MapPreview, robot_colour
@@ -30,6 +31,10 @@ def merged_because(p, method: str) -> str:
         return (f"confidence {p.confidence:.2f}: the chance that no wrong placement of these maps "
                 "fits as well")
     return f"confidence {p.confidence:.2f} by the consensus test (one 0-1 scale for every method)"
+
+
+#: Widest map name in the metrics table: the panel's 40 columns less four numbers' columns
+_METRICS_LABEL = 12
 
 
 class ResultPanel(Vertical):
@@ -137,9 +142,12 @@ class ResultPanel(Vertical):
         order = list(result.fused.order)  # the maps in the fused map, in the order they were added
         for k, m in enumerate(evaluation.steps):
             # row k is the fused map after the (k+1)-th map of the fusion order was added
-            label = (self._names[order[k]] if k == 0 else "+ " + self._names[order[k]]) \
-                if k < len(order) else table1_label(k)
-            metrics.add_row(label, f"{m.completeness:.1f}", f"{m.accuracy:.1f}",
+            # the end of a long name (the map's own), so that the four columns fit the panel
+            label = (clip_left(self._names[order[k]], _METRICS_LABEL) if k == 0 else
+                     "+ " + clip_left(self._names[order[k]], _METRICS_LABEL - 2)) \
+                if k < len(order) else clip_left(table1_label(k), _METRICS_LABEL)
+            metrics.add_row(label, f"{m.completeness:.1f}",
+                            f"{m.accuracy:.1f}",
                             f"{m.precision:.1f}", f"{m.efficiency:.1f}")
 
     def owner(self):
