@@ -144,6 +144,8 @@ def _read_yaml(yaml_path: Path) -> _MapYaml:
         negate = bool(negate)
     elif isinstance(negate, int) and negate in (0, 1):
         negate = bool(negate)
+    elif isinstance(negate, str) and negate.strip() in ("0", "1"):
+        negate = negate.strip() == "1"   # quoted, as the numbers may be (map_server reads it so)
     else:
         raise MapFormatError(f"{_short(yaml_path)}: 'negate' must be 0 or 1, got {show(negate)}")
 

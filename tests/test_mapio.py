@@ -356,6 +356,8 @@ def test_negate(tmp_path):
     grid = load_map(write_map(tmp_path, "neg", p5(pixels), negate=1))
     assert grid.data.tolist() == [[0, 100, -1]]
     assert load_map(write_map(tmp_path, "neg_b", p5(pixels), negate=True)).data.tolist() == [[0, 100, -1]]
+    # quoted, as numbers may be: it was refused ("'negate' must be 0 or 1, got '1'")
+    assert load_map(write_map(tmp_path, "neg_q", p5(pixels), negate="1")).data.tolist() == [[0, 100, -1]]
 
 
 def test_scale_mode(tmp_path):
