@@ -255,3 +255,26 @@ def test_a_finished_command_is_not_killed_by_a_late_ctrl_c(monkeypatch, capsys):
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
     finally:
         signal.signal(signal.SIGINT, before)
+
+
+def test_an_upper_case_output_name_is_taken_and_an_empty_report_path_refused(tmp_path, capsys):
+    """-o M.YAML was refused ('must end in .yaml'), though maps so named are read; --report ''
+    silently meant the default report."""
+    from fusionkit.grid import OccupancyGrid
+    from fusionkit.mapio import load_map, save_map
+
+    data = np.full((60, 60), 0, np.int8)
+    data[0, :] = data[-1, :] = data[:, 0] = data[:, -1] = 100
+    data[20:40, 30] = 100
+    save_map(OccupancyGrid(data, 0.1, (0.0, 0.0, 0.0)), tmp_path / "a.yaml")
+    save_map(OccupancyGrid(data, 0.1, (1.0, 0.5, 0.0)), tmp_path / "b.yaml")
+    maps = [str(tmp_path / "a.yaml"), str(tmp_path / "b.yaml")]
+    assert main(["merge", *maps, "-o", str(tmp_path / "M.YAML"), "--method", "map-merge",
+                 "--quiet"]) in (0, 3)
+    assert load_map(tmp_path / "M.YAML").resolution == 0.1
+    assert (tmp_path / "M.report.json").is_file()
+    capsys.readouterr()
+    assert main(["merge", *maps, "-o", str(tmp_path / "m.yaml"), "--report", ""]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--report is empty" in err, err
+    assert not (tmp_path / "m.yaml").exists()

@@ -54,8 +54,11 @@ def run(args) -> int:
     from ..progress import ProgressBar
 
     out = Path(args.output)
-    if out.suffix not in (".yaml", ".yml"):
+    if out.suffix.lower() not in (".yaml", ".yml"):   # (M.YAML too, as maps are read)
         raise InputError(f"{show(str(out), 200)}: the output must be a map YAML path ending in .yaml")
+    if args.report is not None and not str(args.report).strip():
+        raise InputError("--report is empty: give the report's path, or leave --report out for "
+                         f"{out.stem}.report.json beside the map")
     report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
     image_path = out.with_suffix(".pgm")
     if len(args.maps) < 2:
