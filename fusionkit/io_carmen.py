@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -330,14 +329,10 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
     # an earlier run in the folder (imported or simulated), replaced with --force: its sessions
     # the new one does not have, and the merges of its maps, go with the same commit (left,
     # they were merged with the new sessions, and scored against the new truth)
-    stale = []
-    if overwrite and out_dir.is_dir():
-        from .sim_output import _previous_robot_files, merges_of_run
+    from .sim_output import replaced_run_files
 
-        keep = {os.path.realpath(q) for q, _ in files} | {os.path.realpath(truth_path),
-                                                          os.path.realpath(path)}
-        stale = [q for q in dict.fromkeys(_previous_robot_files(out_dir) + merges_of_run(out_dir))
-                 if q.is_file() and os.path.realpath(q) not in keep]
+    stale = replaced_run_files(out_dir, [q for q, _ in files] + [truth_path], [path]) \
+        if overwrite else []
     with made_out_dir(out_dir):
         write_set(files + [(q, None) for q in stale],
                   (truth_path, (json.dumps(truth, indent=2) + "\n").encode("utf-8")),

@@ -11,7 +11,7 @@ from ._atomic import check_not_input, check_out_dir, made_out_dir, recover_set, 
 from .errors import FusionkitError, InputError
 from .mapping import MappingConfig
 
-__all__ = ["write_run", "check_run_dir", "merges_of_run"]
+__all__ = ["write_run", "check_run_dir", "merges_of_run", "replaced_run_files"]
 
 
 _RUN_SUFFIXES = (".yaml", ".pgm", ".scans.npz")
@@ -66,6 +66,18 @@ def merges_of_run(out: Path) -> list[Path]:
             if name.endswith((".yaml", ".yml")) and not _ROBOT_NAME.fullmatch(name.rsplit(".", 1)[0]):
                 found += [out / name, (out / name).with_suffix(".pgm")]
     return [p for p in dict.fromkeys(found) if p.is_file()]
+
+
+def replaced_run_files(out: Path, keep, inputs=(), more=()) -> list[Path]:
+    """The files of an earlier run in ``out`` that a new run writing ``keep`` there makes
+    wrong: its robot files the new run does not write, the merges of its robots
+    (:func:`merges_of_run`) and ``more``; never a file of ``keep`` nor of ``inputs``."""
+    if not out.is_dir():
+        return []
+    kept = {Path(q).resolve() for q in [*keep, *inputs]}
+    return [p for p in dict.fromkeys([*_previous_robot_files(out), *map(Path, more),
+                                      *merges_of_run(out)])
+            if p.is_file() and p.resolve() not in kept]
 
 
 def check_run_dir(out_dir) -> Path:
@@ -128,17 +140,13 @@ def write_run(sim, out_dir, *, world_path=None, stale=()) -> Path:
     if not all(hasattr(sim, a) for a in ("robots", "world", "config")):
         raise InputError(f"write_run needs a Simulation, got {type(sim).__name__}")
     out = check_run_dir(out_dir)
-    previous = _previous_robot_files(out) if out.is_dir() else []
     names = [r.name for r in sim.robots]
     files = [n + s for n in names for s in _RUN_SUFFIXES] + ["world.yaml", "world.pgm", "truth.json"]
     protected: list[Path] = []
     if world_path is not None:
         protected = _protected([world_path]) + [scans_path_for(world_path)]
     check_not_input([out / f for f in files], protected)
-    keep = {out / f for f in files}
-    inputs = {q.resolve() for q in protected}
-    stale = [p for p in dict.fromkeys([*previous, *map(Path, stale), *merges_of_run(out)])
-             if p not in keep and p.is_file() and p.resolve() not in inputs]
+    stale = replaced_run_files(out, [out / f for f in files], protected, stale)
 
     payloads = []
     yamls = []

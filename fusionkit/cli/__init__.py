@@ -187,8 +187,8 @@ def _main(argv) -> int:
 
 
 def _interrupted(command: str, argv, exc: KeyboardInterrupt) -> int:
-    """Say that ``command`` was stopped by SIGINT or SIGTERM (``exc``) and what it left; its
-    exit status."""
+    """Say that ``command`` was stopped by SIGINT, SIGTERM or SIGHUP (``exc``) and what it
+    left; its exit status."""
     _quiet_signals()
     if _command_of(sys.argv[1:] if argv is None else list(argv)) == "ros2":
         # the ROS 2 commands run until stopped and write nothing: stopped while they start
@@ -237,11 +237,10 @@ def _say(line: str) -> None:
 
 
 def _quiet_signals() -> None:
-    """Ignore further Ctrl-C / SIGTERM while the process exits (no second traceback)."""
+    """Ignore further Ctrl-C, SIGTERM or SIGHUP while the process exits (no second traceback)."""
     import signal
 
-    for s in (signal.SIGINT, signal.SIGTERM) + ((signal.SIGHUP,) if hasattr(signal, "SIGHUP")
-                                                else ()):
+    for s in _signals._SIGNALS:
         try:
             signal.signal(s, signal.SIG_IGN)
         except (ValueError, OSError):

@@ -162,13 +162,11 @@ def _peer(method: str, grids, reference: int, seed: int, emit):
         if len(keep) >= 2 and reference not in keep:
             # its largest group holds maps linked among themselves but not the reference: a
             # group (placed in its first map's frame), not a merge into the reference's map
-            root = keep[0]
-            in_group = mod.estimate_maps(grids, chaining=chaining, reference=root, seed=seed)
-            tree = []
             group_of = [0 if k == reference else 1 if k in keep else None for k in range(n)]
-            g_conf = [1.0 if k == root else float(in_group.confidences[k]) if k in keep else 0.0
+            g_conf = [1.0 if k == keep[0] else float(est.confidences[k]) if k in keep else 0.0
                       for k in range(n)]
-            groups = (group_of, list(in_group.transforms), g_conf, [tuple(in_group.tree)])
+            groups = (group_of, list(est.group_transforms), g_conf, [tuple(tree)])
+            tree = []
             for k in keep:
                 reasons[k] = (f"its largest group of confidently matched maps does not hold the "
                               f"reference map; it is placed in group 1 with {len(keep) - 1} "

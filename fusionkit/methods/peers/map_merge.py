@@ -293,6 +293,9 @@ class MapsEstimate:
         Wall-clock time (s).
     diagnostics : dict
         ``keypoints`` per map, ``matches`` and ``inliers`` per pair ``(i, j)``, ``i < j``.
+    group_transforms : tuple of (Transform2D or None) or None
+        When the kept maps do not hold the reference: per map, its transform into the frame of
+        the first kept map (None outside them); else None.
     """
 
     transforms: tuple
@@ -306,6 +309,7 @@ class MapsEstimate:
     reference: int
     seconds: float
     diagnostics: dict = field(default_factory=dict)
+    group_transforms: tuple | None = None
 
 
 def estimate_maps(grids, *, confidence: float = 1.0, chaining: str = "corrected", reference: int = 0,
@@ -374,7 +378,6 @@ def estimate_maps(grids, *, confidence: float = 1.0, chaining: str = "corrected"
     conf = np.array([[pairs[i, j].confidence for j in range(n)] for i in range(n)])
 
     keep = _biggest_component(conf, opts.confidence)
-    none = tuple([None] * n)
     base = dict(pair_confidence=conf, chaining=chaining, reference=reference,
                 diagnostics={"keypoints": tuple(len(f.points) for f in feats),
                              "matches": {(i, j): len(pairs[i, j].matches) for i in range(n) for j in range(i + 1, n)},
@@ -396,23 +399,30 @@ def estimate_maps(grids, *, confidence: float = 1.0, chaining: str = "corrected"
         inv_c = np.linalg.inv(cams[centre])
         cams = [inv_c @ c if shipped else c @ inv_c for c in cams]
 
-    if reference not in keep:
-        transforms = tuple(Transform2D.identity() if k == reference else None for k in range(n))
-        scales = tuple(1.0 if k == reference else None for k in range(n))
-    else:
-        r_ref = cams[keep.index(reference)]
+    def in_frame_of(root: int) -> tuple[tuple, tuple]:
+        """The kept maps' transforms into map ``root``'s frame (a kept map), and their scales."""
+        r_root = cams[keep.index(root)]
         transforms, scales = [None] * n, [None] * n
         for a, k in enumerate(keep):
-            sim = r_ref @ np.linalg.inv(cams[a])      # image k -> reference image (pixels)
+            sim = r_root @ np.linalg.inv(cams[a])      # image k -> root image (pixels)
             pts = feats[k].points
             anchor = (pts.astype(float).mean(axis=0) + 0.5) if len(pts) else \
                 np.array([prepared[k].cols / 2.0, prepared[k].rows / 2.0])
             cell_t, s = _rigid_cells(sim, anchor)
-            transforms[k] = cell_to_map(prepared[reference], prepared[k], cell_t)
+            transforms[k] = cell_to_map(prepared[root], prepared[k], cell_t)
             scales[k] = s
-        transforms[reference] = Transform2D.identity()
-        transforms, scales = tuple(transforms), tuple(scales)
+        transforms[root] = Transform2D.identity()
+        return tuple(transforms), tuple(scales)
+
+    group_transforms = None
+    if reference not in keep:
+        transforms = tuple(Transform2D.identity() if k == reference else None for k in range(n))
+        scales = tuple(1.0 if k == reference else None for k in range(n))
+        group_transforms = in_frame_of(keep[0])[0]
+    else:
+        transforms, scales = in_frame_of(reference)
     confs = tuple(float(max((conf[k, j] for j in keep if j != k), default=0.0)) if k in keep else 0.0
                   for k in range(n))
     return MapsEstimate(transforms, confs, component=tuple(keep), centre=keep[centre], tree=tuple(tree),
+                        group_transforms=group_transforms,
                         scales=scales, seconds=clock(), **base)

@@ -241,7 +241,7 @@ class MainScreen(Screen):
         self.merging = True
         if self.result is not None:   # the Result tab keeps the last merge meanwhile: said so
             self.result_panel.mark_earlier(f"a merge is running; this is the merge of "
-                                           f"{self.result_time}")
+                                           f"{self.result_time}", running=True)
         self.run_panel.begin(len(maps), config.pso.iterations, config.method)
         self.action_show_tab("run")
         self._merge(list(maps), config, map_labels(maps))

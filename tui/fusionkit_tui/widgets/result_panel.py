@@ -177,13 +177,13 @@ class ResultPanel(Vertical):
         return (f"Fused map ({r.config.method}): {merged} of {len(r.placements)} maps, "
                 f"{r.grid.cols}x{r.grid.rows} cells{self._earlier}")
 
-    def mark_earlier(self, why: str) -> None:
-        """Say that the result shown is an earlier one (the last run was cancelled or failed,
-        or one is running)."""
+    def mark_earlier(self, why: str, *, running: bool = False) -> None:
+        """Say that the result shown is an earlier one: the last run was cancelled or failed,
+        or (``running``) one is running."""
         if self._result is None:
             return
         self._earlier = " (earlier run)"
-        hint = "" if why.startswith("a merge is running") else "; e exports it, r runs again"
+        hint = "" if running else "; e exports it, r runs again"
         self.query_one("#why", Static).update(Text(why + hint, style="bold yellow"))
         self._draw_map()
 

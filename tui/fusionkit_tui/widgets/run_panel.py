@@ -137,23 +137,22 @@ class RunPanel(Vertical):
                 entries.append(("━━ ", colour or "", label))
         legend = self.query_one("#legend", Static)
         width = legend.size.width or self.size.width or 80
+
+        def size(line) -> int:   # its marks and labels, two spaces between entries
+            return sum(len(mark) + len(label) for mark, _, label in line) + 2 * (len(line) - 1)
+
         lines: list[list] = [[]]
-        used = 0
-        for n, entry in enumerate(entries):
-            size = len(entry[0]) + len(entry[2]) + (2 if lines[-1] else 0)
-            if lines[-1] and used + size > width:
-                if len(lines) == 2:
-                    more = f"  +{len(entries) - n} more"
-                    while lines[-1][1:] and used + len(more) > width:   # room for the count
-                        dropped = lines[-1].pop()
-                        used -= len(dropped[0]) + len(dropped[2]) + 2
-                        n -= 1
-                    lines[-1].append(("", "", f"+{len(entries) - n} more"))
-                    break
+        for entry in entries:
+            if lines[-1] and size(lines[-1] + [entry]) > width:
                 lines.append([])
-                used, size = 0, size - 2
             lines[-1].append(entry)
-            used += size
+        if len(lines) > 2:   # two lines, the last ending in how many entries did not fit
+            lines = lines[:2]
+            left = len(entries) - len(lines[0]) - len(lines[1])
+            while len(lines[1]) > 1 and size(lines[1] + [("", "", f"+{left} more")]) > width:
+                lines[1].pop()
+                left += 1
+            lines[1].append(("", "", f"+{left} more"))
         text = Text()
         for i, line in enumerate(lines):
             if i:
