@@ -82,8 +82,25 @@ class MapMetrics:
         if digits is not None:
             for k, v in d.items():
                 if isinstance(v, float):
-                    d[k] = round(v, digits)
+                    d[k] = round_percent(v, digits)
         return d
+
+
+def round_percent(value: float, digits: int = 2) -> float:
+    """``value`` (percent) rounded to ``digits``, but never to 0 or 100 unless it is exactly that:
+    99.997 is 99.99 at two digits, not 100.00, and 0.001 is 0.01, not 0.00."""
+    r = round(float(value), digits)
+    step = 10.0 ** -digits
+    if r >= 100.0 and value < 100.0:
+        return round(100.0 - step, digits)
+    if r <= 0.0 and value > 0.0:
+        return round(step, digits)
+    return r
+
+
+def format_percent(value: float, digits: int = 2, width: int = 0) -> str:
+    """``value`` (percent) as text by :func:`round_percent`, right-aligned to ``width``."""
+    return f"{round_percent(value, digits):{width}.{digits}f}"
 
 
 def _dilate8(mask: np.ndarray) -> np.ndarray:
@@ -251,7 +268,7 @@ def table1_label(k: int) -> str:
 def _cells(m, keys) -> list[str]:
     if m is None:
         return ["" for _ in keys]
-    return [f"{getattr(m, k):.2f}" for k in keys]
+    return [format_percent(getattr(m, k)) for k in keys]
 
 
 def format_table1(rows, paper: bool = True, oracle=None) -> str:

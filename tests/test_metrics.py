@@ -8,7 +8,8 @@ import pytest
 from fusionkit.errors import InputError
 from fusionkit.grid import OccupancyGrid
 from fusionkit.metrics import (PAPER_TABLE1, MapMetrics, TransformError, evaluate_map,
-                               format_table1, table1, table1_label, transform_errors)
+                               format_percent, format_table1, round_percent, table1,
+                               table1_label, transform_errors)
 from fusionkit.transform import Transform2D
 
 U, F, O = -1, 0, 100
@@ -124,6 +125,21 @@ def test_transform_errors():
     assert e.as_dict() == {"translation_m": 0.3, "translation_cells": 3.0, "rotation_deg": 11.4592}
     with pytest.raises(InputError):
         transform_errors(Transform2D(), Transform2D(), 0.0)
+
+
+def test_a_map_with_one_wrong_cell_is_never_printed_as_perfect():
+    truth = np.full((200, 200), F, np.int8)
+    truth[::7, :] = O
+    fused = truth.copy()
+    fused[3, 3] = O                                   # one free cell of 40000 called occupied
+    m = evaluate_map(grid(fused), grid(truth))
+    assert m.accuracy == pytest.approx(100 * 39999 / 40000) and m.completeness == 100.0
+    line = next(s for s in format_table1([m], paper=False).splitlines() if s.startswith("M1"))
+    assert line.split()[2:5] == ["100.00", "99.99", "99.98"]    # Compl, Acc, Prec
+    assert m.as_dict()["accuracy"] == 99.9975 and m.as_dict(2)["accuracy"] == 99.99
+    assert round_percent(99.99999, 4) == 99.9999 and round_percent(0.00001) == 0.01
+    assert round_percent(100.0) == 100.0 and round_percent(0.0) == 0.0
+    assert format_percent(99.996, 2, 7) == "  99.99" and format_percent(12.345, 1) == "12.3"
 
 
 def test_table1_rows_and_labels():

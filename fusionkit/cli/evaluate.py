@@ -391,16 +391,18 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
 
 def format_evaluation(result: dict) -> str:
     """The evaluation as tables for the terminal."""
+    from ..metrics import format_percent
+
     m = result["metrics"]
     lines = [
         f"merged map {result['merged']} in the frame of {result['reference']}, "
         f"scored against {result['world']}",
         "",
-        f"  {'completeness':<26}{m['completeness']:7.2f} %",
-        f"  {'accuracy':<26}{m['accuracy']:7.2f} %",
-        f"  {'precision':<26}{m['precision']:7.2f} %",
-        f"  {'efficiency':<26}{m['efficiency']:7.2f} %",
-        f"  {'precision (within 1 cell)':<26}{m['precision_tol1']:7.2f} %",
+        f"  {'completeness':<26}{format_percent(m['completeness'], 2, 7)} %",
+        f"  {'accuracy':<26}{format_percent(m['accuracy'], 2, 7)} %",
+        f"  {'precision':<26}{format_percent(m['precision'], 2, 7)} %",
+        f"  {'efficiency':<26}{format_percent(m['efficiency'], 2, 7)} %",
+        f"  {'precision (within 1 cell)':<26}{format_percent(m['precision_tol1'], 2, 7)} %",
         f"  cells: {m['known_truth']} known in the truth, {m['known_both']} of them known in the "
         f"merged map, {m['occupied_fused']} occupied in the merged map",
     ]

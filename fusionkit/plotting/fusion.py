@@ -140,7 +140,7 @@ def plot_fusion_steps(fused, names=None, *, metrics=None, title: str | None = No
     """The fused map growing: one panel per step (``M1``, ``M1,2``, ...), cells tinted by the
     robot that first saw them; with ``metrics`` (one :class:`~fusionkit.metrics.MapMetrics`
     per step) the completeness and precision are in the panels' titles."""
-    from ..metrics import table1_label
+    from ..metrics import format_percent, table1_label
 
     steps = fused.steps
     if not steps:
@@ -158,7 +158,8 @@ def plot_fusion_steps(fused, names=None, *, metrics=None, title: str | None = No
         t = f"{table1_label(i)}: + {names[order[i]]}"
         if metrics is not None:
             m = metrics[i]
-            t += f"\ncompleteness {m.completeness:.1f}%, precision {m.precision:.1f}%"
+            t += (f"\ncompleteness {format_percent(m.completeness, 1)}%, "
+                  f"precision {format_percent(m.precision, 1)}%")
         plot_fused(ax, fused, names, step=i, title=t, legend=(i == n - 1))
         ax.title.set_fontsize(9)
     for ax in axes[n:]:
