@@ -367,6 +367,16 @@ def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
         no_return |= ranges >= sentinel * (1.0 - NO_RETURN_BAND)
     if config.max_range is not None:
         no_return |= ranges >= config.max_range
+    if no_return.all():
+        # nothing returned from a wall: the map would be all free floor, no wall to merge on
+        shortest = float(np.min(np.where(np.isfinite(ranges), ranges, np.inf)))
+        if config.max_range is not None and shortest >= config.max_range and (
+                sentinel is None or shortest < sentinel * (1.0 - NO_RETURN_BAND)):
+            raise InputError(f"{_short(path)}: every reading is at or beyond --max-range "
+                             f"{config.max_range:g} m (the shortest is {shortest:.2f} m): give the "
+                             f"scanner's usable range, or leave --max-range out")
+        raise InputError(f"{_short(path)}: no reading of the log returned from a wall (all "
+                         f"{ranges.size} are the scanner's no-return value): nothing to map")
     ranges[no_return] = np.inf
     if config.max_range is not None:
         range_max = float(config.max_range)

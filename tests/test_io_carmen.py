@@ -157,6 +157,21 @@ def test_max_range_option_and_single_max_is_a_reading(tmp_path):
     np.testing.assert_array_equal(np.isinf(c.scans.ranges[0]), [False, False, True, True])
 
 
+def test_a_log_with_no_reading_left_is_refused_not_imported_as_an_empty_map(tmp_path):
+    lines = [flaser([1.0, 5.0, 12.0, 50.0], (0, 0, 0), 1), flaser([1.0, 2.0, 3.0, 4.0], (0, 0, 0), 2)]
+    p = write(tmp_path, lines)
+    with pytest.raises(InputError, match=r"every reading is at or beyond --max-range 0.5 m "
+                                         r"\(the shortest is 1.00 m\)"):
+        read_carmen(p, CarmenConfig(max_range=0.5))
+    with pytest.raises(InputError, match="every reading"):
+        import_carmen(p, tmp_path / "out", config=CarmenConfig(max_range=0.5))
+    assert not (tmp_path / "out").exists()
+    blind = write(tmp_path, [robotlaser([8.0, 9.0, 8.0], (k, 0, 0), (k, 0, 0), k) for k in range(3)],
+                  name="blind.clf")     # a scanner that saw nothing within its 8 m
+    with pytest.raises(InputError, match="no reading of the log returned from a wall"):
+        read_carmen(blind)
+
+
 def test_own_frame_and_split_sessions():
     rng = np.random.default_rng(3)
     from fusionkit.scanlog import ScanLog
