@@ -126,6 +126,10 @@ class ConsensusConfig:
         after ICP.
     pso_top : int
         See ``pso_refine``.
+    polish : bool
+        After the test, refine the placements handed on (the best and each plausible one) with
+        walls paired from the points themselves (:mod:`._polish`): the search's pairing is a
+        fifth of a cell off on turned walls, always the same way. It never changes a decision.
     fallback : bool
         When a map is left out, search its pairs again exhaustively: every ``fallback_step``
         degrees of rotation, three times as many candidates refined.
@@ -197,6 +201,7 @@ class ConsensusConfig:
     alias_peaks: int = 6
     pso_refine: bool = True
     pso_top: int = 4
+    polish: bool = True
     fallback: bool = True
     fallback_step: float = 2.0
     fallback_rotations: int = 12

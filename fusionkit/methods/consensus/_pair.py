@@ -16,6 +16,7 @@ from ._hypotheses import cluster_hypotheses, scan_hypotheses
 from ._index import MapIndex
 from ._search import Correlator, EvidenceRaster, pyramid_rotations, rotation_candidates
 from ._null import NullModel, null_model, weighted_misses
+from ._polish import polish
 from ._memo import pair_memo, points_key, refine_memo, verify_memo
 from ._slide import cross_wall
 from ._verify import (DEFAULT_GATES, Check, Placements, _in_cells, displacement, refine_cloud,
@@ -304,6 +305,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                 refined[k] = Candidate(t, chk, c.source)
         refined.sort(key=_order)
         best = refined[0]
+    on_scans = False
     if cfg.use_scans and len(a.cloud) and len(b.cloud):
         # recorded scans do not quantise walls to cells: pin the best placement down on them
         key = ("cloud", best.transform.x, best.transform.y, best.transform.theta)
@@ -316,6 +318,7 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
             if chk.evidence() >= 0.9 * best.rank and not _side_by_side(chk):
                 best = Candidate(t, chk, best.source)
                 refined[0] = best
+                on_scans = True
 
     # the test: the best placement's evidence against the evidence of wrong placements of the
     # same two maps (a contrario: its number of false alarms), then against every distinct
@@ -428,6 +431,15 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                   f"{100 * best.check.score:.0f}% of the walls meet where wrong placements of these "
                   f"maps reach {100 * null.p0:.0f}%, too few walls for that to be sure "
                   f"(expected false alarms 10^{log_nfa:.1f}, allowed {eps:g})")
+    if cfg.polish:
+        # what was decided stays; the placements handed on lose the pairing's bias (._polish)
+        done = {id(best): best if on_scans else replace(best, transform=polish(a, b, best.transform))}
+        for c in plausible:
+            if id(c) not in done:
+                done[id(c)] = replace(c, transform=polish(a, b, c.transform))
+        plausible = [done[id(c)] for c in plausible]
+        refined = [done.get(id(c), c) for c in refined]
+        best = done[id(best)]
     return PairResult(ia, ib, best.transform, float(confidence), bool(accepted),
                       ambiguous, tuple(plausible), best, tuple(refined),
                       len(starts), n_hyp, reason, time.perf_counter() - t0,

@@ -104,30 +104,32 @@ def _icp_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, min_p
             pairs = m
             if m < min_pairs:
                 return tx, ty, th, m
-            sx /= m
-            sy /= m
-            dx /= m
-            dy /= m
-            num = 0.0
-            den = 0.0
-            for k in range(m):
-                px = src[k, 0] - sx
-                py = src[k, 1] - sy
-                qx = dst[k, 0] - dx
-                qy = dst[k, 1] - dy
-                num += px * qy - py * qx
-                den += px * qx + py * qy
-            nth = math.atan2(num, den)
-            nc = math.cos(nth)
-            ns = math.sin(nth)
-            ntx = dx - (nc * sx - ns * sy)
-            nty = dy - (ns * sx + nc * sy)
+            ntx, nty, nth = _fit_pairs(src, dst, m, sx / m, sy / m, dx / m, dy / m)
             moved = abs(ntx - tx) + abs(nty - ty)
             turned = abs(math.atan2(math.sin(nth - th), math.cos(nth - th)))
             tx, ty, th = ntx, nty, nth
             if moved < settle and turned < 1e-4:
                 break
     return tx, ty, th, pairs
+
+
+@njit
+def _fit_pairs(src, dst, m, sx, sy, dx, dy):
+    """The rigid motion ``(tx, ty, theta)`` fitting ``src[:m]`` to ``dst[:m]`` (as
+    :func:`rigid_fit`), ``(sx, sy)`` and ``(dx, dy)`` their centroids."""
+    num = 0.0
+    den = 0.0
+    for k in range(m):
+        px = src[k, 0] - sx
+        py = src[k, 1] - sy
+        qx = dst[k, 0] - dx
+        qy = dst[k, 1] - dy
+        num += px * qy - py * qx
+        den += px * qx + py * qy
+    th = math.atan2(num, den)
+    c = math.cos(th)
+    s = math.sin(th)
+    return dx - (c * sx - s * sy), dy - (s * sx + c * sy), th
 
 
 def _gated(a: MapIndex) -> np.ndarray:
