@@ -71,14 +71,22 @@ def test_settings_take_map_merge_defaults_and_init_poses():
     assert s.init_poses["/robot1"].is_close(fk.Transform2D(-3.0, 1.0, 0.5))
 
 
+def test_a_half_given_initial_pose_skips_that_robot_not_the_node():
+    """As map_merge, which skips a robot it cannot read a whole initial pose for: a parameter
+    file it runs with used to stop this node with exit 2."""
+    s = settings_from({"known_init_poses": True, "/r1/map_merge/init_pose_x": 1.0,
+                       "/r2/map_merge/init_pose_x": 2.0, "/r2/map_merge/init_pose_y": 0.5,
+                       "/r2/map_merge/init_pose_yaw": 0.0})
+    assert set(s.init_poses) == {"/r2"} and set(s.partial_init_poses) == {"/r1"}
+    assert "give /r1/map_merge/init_pose_y, /r1/map_merge/init_pose_yaw too" in s.partial_init_poses["/r1"]
+
+
 @pytest.mark.parametrize("values, message", [
     ({"merging_rate": "fast"}, "parameter merging_rate: expected a number"),
     ({"estimation_rate": 0.0}, "parameter estimation_rate: expected a rate in Hz"),
     ({"known_init_poses": 3}, "parameter known_init_poses: expected true or false"),
     ({"method": "magic"}, "parameter method: 'magic' is not a method"),
     ({"min_confidence": 1.5}, "parameter min_confidence: expected a number between 0 and 1"),
-    ({"known_init_poses": True, "/r1/map_merge/init_pose_x": 1.0},
-     "give /r1/map_merge/init_pose_y, /r1/map_merge/init_pose_yaw"),
     ({"merged_map_topic": "bad topic"}, "parameter merged_map_topic: 'bad topic' is not a ROS 2 topic name"),
     ({"robot_map_topic": "9map"}, "parameter robot_map_topic: '9map' is not a ROS 2 topic name"),
 ])
@@ -210,6 +218,69 @@ def test_an_interrupted_run_of_better_estimates_starts_over():
     assert "confirmation 1" in tr.decide("/r", new, 0.9, "", 0.1, score=better).why
     tr.decide("/r", old, 0.9, "", 0.1)
     assert "confirmation 1" in tr.decide("/r", new, 0.9, "", 0.1, score=better).why
+
+
+def test_a_held_transform_that_no_longer_fits_the_maps_is_dropped_not_kept():
+    """A robot whose SLAM restarted in a new frame: the method refuses its new map, and its old
+    transform, which the test no longer takes on the current maps, used to stay merged (with
+    its old confidence) across the other robots' walls."""
+    tr = _tracker()
+    old, new = fk.Transform2D(1, 2, 0.1), fk.Transform2D(4, 2, 1.6)
+    tr.decide("/r", old, 0.9, "", 0.1)
+    # refused this round, the held one still fits: kept
+    d = tr.decide("/r", None, 0.0, "ambiguous", 0.1, fits=lambda t: 0.8)
+    assert d.action == "kept" and tr.held("/r")[0] == old
+    # refused, and the held one no longer fits: dropped, the robot left out
+    d = tr.decide("/r", None, 0.0, "best placement is contradicted", 0.1, fits=lambda t: 0.01)
+    assert d.action == "dropped" and d.transform is None and tr.held("/r") is None
+    assert "no longer fits the current maps: confidence 0.01 there" in d.why
+    assert d.why.endswith("new estimate refused: best placement is contradicted")
+    # a different, confident estimate while the held one no longer fits: placed at once, not
+    # after switch_confirmations rounds
+    tr.decide("/r", old, 0.9, "", 0.1)
+    scores = {old: 0.15, new: 1.0}
+    d = tr.decide("/r", new, 0.9, "", 0.1, score=scores.__getitem__, fits=lambda t: 0.0)
+    assert d.action == "placed" and tr.held("/r")[0] == new and "anew" in d.why
+    # the held transform is only checked where it would be kept
+    asked = []
+    d = tr.decide("/r", new, 0.95, "", 0.1, fits=lambda t: asked.append(t) or 0.0)
+    assert d.action == "confirmed" and not asked
+
+
+def test_a_robot_whose_map_restarts_in_a_new_frame_is_not_left_at_its_old_place():
+    from pathlib import Path
+
+    from fusionkit.methods.peers import crop_pair
+    from fusionkit.ros2._params import NodeSettings
+    from fusionkit.ros2._robots import estimate_round
+    real = Path(__file__).resolve().parents[1] / "maps" / "real"
+    pair = crop_pair(fk.load_map(real / "intel_lab.yaml"), np.random.default_rng(3), size=200,
+                     min_overlap=0.4)
+    settings = NodeSettings()
+
+    def placed_tracker():
+        tr = _tracker()
+        tr.fix("/r1", fk.Transform2D.identity())
+        [d] = estimate_round([("/r1", pair.a), ("/r2", pair.b)], "/r1", settings, tr)
+        assert d.action == "placed"
+        return tr, d.transform
+
+    # the new map is 8 x 8 m of another building, at the old map's origin: refused, and the
+    # old transform lays it across the first robot's walls
+    mit = fk.load_map(real / "mit_stata_basement.yaml")
+    r, c = np.nonzero(mit.occupied_mask())
+    r0, c0 = int(r[len(r) // 2]), int(c[len(c) // 2])
+    small = fk.OccupancyGrid(mit.data[r0 - 80:r0 + 80, c0 - 80:c0 + 80].copy(), mit.resolution,
+                             pair.b.origin, "small")
+    tr, _ = placed_tracker()
+    [d] = estimate_round([("/r1", pair.a), ("/r2", small)], "/r1", settings, tr)
+    assert d.action == "dropped" and tr.held("/r2") is None and "new estimate refused" in d.why
+    # the same map turned a quarter turn in its new frame: placed again at once, where it fits
+    turned = fk.OccupancyGrid(np.rot90(pair.b.data).copy(), pair.b.resolution, pair.b.origin, "turned")
+    tr, old = placed_tracker()
+    [d] = estimate_round([("/r1", pair.a), ("/r2", turned)], "/r1", settings, tr)
+    assert d.action == "placed" and d.transform != old and "anew" in d.why
+    assert fk.overlap_score(pair.a, turned, d.transform)[0] > 0.9
 
 
 def test_play_finds_a_runs_robots_and_grows_their_maps(tmp_path):

@@ -291,7 +291,8 @@ def test_an_empty_first_map_is_not_the_reference_and_a_pending_switch_is_decided
     mapped something. A robot placed from a
     wrong map (here robot_2's, published under robot_3) then sending its own map once kept the
     wrong transform for good: the better estimate needed a second estimation, and maps that stop
-    changing were never estimated again."""
+    changing were never estimated again; then it kept the wrong one until a second estimation
+    confirmed the better one, though the wrong one no longer fitted robot_3's map at all."""
     probe_out = tmp_path / "probe.jsonl"
     procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
                           "robot_1", "robot_2", "robot_3"])
@@ -318,7 +319,10 @@ def test_an_empty_first_map_is_not_the_reference_and_a_pending_switch_is_decided
     assert procs.stop("pub") == 0 and procs.stop("node") == 0
     log = procs.log("node")
     assert status["reference"] == "/robot_2"              # the first map with a known cell
-    assert "/robot_3: switched" in log and "Traceback" not in log and "ERROR" not in log
+    # the wrong transform no longer fits robot_3's own map: it is not kept until a better one
+    # is confirmed, the new estimate places robot_3 at once
+    assert "/robot_3: placed" in log and "(anew, as its placement no longer fits" in log
+    assert "Traceback" not in log and "ERROR" not in log
     for name in ("robot_1", "robot_3"):
         dist, ang = fk.Transform2D.from_dict(status["robots"][f"/{name}"]["transform"]).error_to(
             truth["robot_2"].inverse @ truth[name])

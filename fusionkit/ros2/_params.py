@@ -73,6 +73,8 @@ class NodeSettings:
     seed: int = 0
     max_map_cells: int = 16_000_000
     init_poses: dict = field(default_factory=dict)
+    #: robots with some but not all of x, y and yaw: what to add (skipped, as map_merge does)
+    partial_init_poses: dict = field(default_factory=dict)
 
     def __post_init__(self):
         from .. import METHODS
@@ -124,9 +126,10 @@ def _coerce(name: str, value, kind: str):
     return v
 
 
-def init_poses_from(values: dict) -> dict:
+def init_poses_from(values: dict) -> tuple[dict, dict]:
     """``{"/robot1": Transform2D, ...}`` from the ``/<robot>/map_merge/init_pose_*`` parameters
-    (a robot needs x, y and yaw; z is read and ignored, maps being planar)."""
+    (a robot needs x, y and yaw; z is read and ignored, maps being planar), and for each robot
+    given only some of them, what to add (such a robot is skipped, as map_merge skips it)."""
     axes: dict = {}
     for name, value in values.items():
         m = INIT_POSE.match(name)
@@ -134,14 +137,15 @@ def init_poses_from(values: dict) -> dict:
             continue
         robot = "/" + m["robot"].strip("/")
         axes.setdefault(robot, {})[m["axis"]] = _coerce(name, value, "float")
-    poses = {}
+    poses, partial = {}, {}
     for robot, a in axes.items():
         missing = [k for k in ("x", "y", "yaw") if k not in a]
         if missing:
-            raise InputError(f"robot {robot}: give {', '.join(f'{robot}/map_merge/init_pose_{k}' for k in missing)} "
-                             f"too (x, y and yaw make a known initial pose)")
+            partial[robot] = (f"give {', '.join(f'{robot}/map_merge/init_pose_{k}' for k in missing)} "
+                              f"too (x, y and yaw make a known initial pose)")
+            continue
         poses[robot] = Transform2D(a["x"], a["y"], a["yaw"])
-    return poses
+    return poses, partial
 
 
 def settings_from(values: dict) -> NodeSettings:
@@ -151,7 +155,7 @@ def settings_from(values: dict) -> NodeSettings:
         if name in values and values[name] is not None:
             kw[name] = _coerce(name, values[name], kind)
     if kw.get("known_init_poses", PARAMETERS["known_init_poses"][0]):
-        kw["init_poses"] = init_poses_from(values)
+        kw["init_poses"], kw["partial_init_poses"] = init_poses_from(values)
     # else, as map_merge, initial poses are not read (a half-given one is no error)
     return NodeSettings(**kw)
 

@@ -65,9 +65,38 @@ def estimate_round(snapshot: list, reference: str, settings: NodeSettings, track
         def score(t, _name=name):
             return _score_against_others(grids, tracker, _name, t)
 
+        def fits(t, _name=name):
+            return _confidence_against_others(grids, tracker, _name, t, settings.seed)
+
         decisions.append(tracker.decide(name, estimate, float(p.confidence), p.reason,
-                                        grids[name].resolution, score=score))
+                                        grids[name].resolution, score=score, fits=fits))
     return decisions
+
+
+def _others_fused(grids: dict, tracker: Tracker, name: str):
+    """The held maps other than ``grids[name]``, fused in the merged frame (None: none held)."""
+    import fusionkit as fk
+
+    others = [(grids[n], tracker.held(n)[0]) for n in grids
+              if n != name and tracker.held(n) is not None]
+    if not others:
+        return None
+    return fk.fuse_maps([g for g, _ in others], [t for _, t in others]).grid
+
+
+def _confidence_against_others(grids: dict, tracker: Tracker, name: str, transform,
+                               seed: int) -> float:
+    """The confidence the consensus test gives ``grids[name]`` placed by ``transform`` on the
+    other held maps fused (:func:`fusionkit.methods.consensus.placement_confidence`, 0-1: the
+    scale of every method's confidence)."""
+    from ..methods.consensus import placement_confidence, prepare_maps
+    from ..pipeline import _same_resolution
+
+    fused = _others_fused(grids, tracker, name)
+    if fused is None:
+        return 0.0
+    a, b = prepare_maps(_same_resolution([fused, grids[name]], 0))
+    return float(placement_confidence(a, b, transform, seed=seed))
 
 
 def _score_against_others(grids: dict, tracker: Tracker, name: str, transform) -> float:
@@ -75,10 +104,8 @@ def _score_against_others(grids: dict, tracker: Tracker, name: str, transform) -
     (:func:`fusionkit.overlap_score`, 0-1)."""
     import fusionkit as fk
 
-    others = [(grids[n], tracker.held(n)[0]) for n in grids
-              if n != name and tracker.held(n) is not None]
-    if not others:
+    fused = _others_fused(grids, tracker, name)
+    if fused is None:
         return 0.0
-    fused = fk.fuse_maps([g for g, _ in others], [t for _, t in others]).grid
     score, _cells = fk.overlap_score(fused, grids[name], transform)
     return float(score)

@@ -6,7 +6,9 @@ new estimate as it comes makes the merged map jump whenever one estimate is off;
 it scores higher on the current maps by ``switch_margin`` in ``switch_confirmations`` successive
 estimations that agree with each other. A new estimate near the accepted one (a few cells and
 degrees: the same placement, fixed better on the grown maps) replaces it at once when it scores
-higher, however close it is.
+higher, however close it is. A held transform is only kept while it still fits: when the maps
+have changed under it (a robot's SLAM restarted in a new frame) so that the test of the method
+no longer takes it, the robot is left out, and a new confident estimate places it at once.
 """
 
 from __future__ import annotations
@@ -36,12 +38,15 @@ def near_place(a: Transform2D, b: Transform2D, resolution: float) -> bool:
 class Decision:
     """The outcome of one estimation for one robot.
 
-    ``action`` is one of ``"placed"`` (first accepted transform), ``"confirmed"`` (the new
-    estimate agrees with the accepted one), ``"refined"`` (a new estimate of the same
-    placement scores higher on the current maps and replaced it), ``"switched"`` (a confidently better transform
-    replaced it), ``"kept"`` (a different estimate was not better enough, or the method
-    refused to place the robot this time), ``"not placed"``; ``transform`` and ``confidence``
-    are what the node now holds (None / 0 when not placed); ``why`` says why in words.
+    ``action`` is one of ``"placed"`` (first accepted transform, or the first after one was
+    dropped), ``"confirmed"`` (the new estimate agrees with the accepted one), ``"refined"`` (a
+    new estimate of the same placement scores higher on the current maps and replaced it),
+    ``"switched"`` (a confidently better transform replaced it), ``"kept"`` (a different
+    estimate was not better enough, or the method refused to place the robot this time, and
+    the accepted transform still fits), ``"dropped"`` (the accepted transform no longer fits
+    the current maps: the robot is left out), ``"not placed"``; ``transform`` and
+    ``confidence`` are what the node now holds (None / 0 when not placed); ``why`` says why in
+    words.
     """
 
     robot: str
@@ -106,7 +111,7 @@ class Tracker:
         self._pending.pop(robot, None)
 
     def decide(self, robot: str, estimate: Transform2D | None, confidence: float, reason: str,
-               resolution: float, score=None) -> Decision:
+               resolution: float, score=None, fits=None) -> Decision:
         """Take one new estimate of ``robot``'s transform and say what the node now holds.
 
         Parameters
@@ -124,7 +129,28 @@ class Tracker:
             only when the estimate differs from the accepted transform. Without it an estimate
             within :func:`same_place` confirms the accepted transform and any other is kept
             out.
+        fits : callable(Transform2D) -> float, optional
+            The confidence (0-1, on the scale of ``confidence``) the method's test gives the
+            accepted transform on the current maps; asked only before the accepted transform
+            would be kept against a refusal or a different estimate. Below ``min_confidence``
+            the accepted transform is dropped.
         """
+        decision = self._decide(robot, estimate, confidence, reason, resolution, score)
+        if decision.action != "kept" or fits is None:
+            return decision
+        still = float(fits(decision.transform))
+        if still >= self.min_confidence:
+            return decision
+        self.forget(robot)
+        gone = (f"its placement no longer fits the current maps: confidence {still:.2f} there, "
+                f"below min_confidence {self.min_confidence:.2f}")
+        if estimate is not None and confidence >= self.min_confidence:
+            self._held[robot] = _Held(estimate, confidence)
+            return Decision(robot, "placed", estimate, confidence, f"anew, as {gone}")
+        return Decision(robot, "dropped", None, 0.0, f"left out, as {gone}; {decision.why}")
+
+    def _decide(self, robot: str, estimate, confidence: float, reason: str, resolution: float,
+                score) -> Decision:
         held = self._held.get(robot)
         if estimate is not None and confidence < self.min_confidence:
             reason = f"confidence {confidence:.2f} is below min_confidence {self.min_confidence:.2f}"

@@ -97,6 +97,8 @@ class MergeNode:
                 f"method {settings.method}, estimation every {1 / settings.estimation_rate:.1f} s")
         self.log.info(f"map merging started: robots' '{settings.robot_map_topic}' topics into "
                       f"{self.merged_topic} (frame {settings.world_frame}), {mode}")
+        for robot, what in sorted(settings.partial_init_poses.items()):
+            self.log.warning(f"{robot}: initial pose incomplete: {what}; the robot will be skipped")
         self._discover()
         node.create_timer(1.0 / settings.discovery_rate, self._guard(self._discover))
         self._threads = [threading.Thread(target=self._compose_loop, name="compose", daemon=True)]
@@ -125,9 +127,21 @@ class MergeNode:
             try:
                 fn(*a)
             except Exception as exc:  # noqa: BLE001 - the node must go on
-                self._once(("error", fn.__name__, type(exc).__name__),
-                           f"{fn.__name__}: {type(exc).__name__}: {exc}", "error")
+                if self._alive():
+                    self._once(("error", fn.__name__, type(exc).__name__),
+                               f"{fn.__name__}: {type(exc).__name__}: {exc}", "error")
         return run
+
+    def _alive(self) -> bool:
+        """Whether the node still runs: not closed, and ROS not shut down (Ctrl-C or SIGTERM
+        shut ROS down before the worker threads hear of it; what fails to publish then is not
+        an error to report, and logging it would fail too)."""
+        if self._stop.is_set():
+            return False
+        try:
+            return bool(self.node.context.ok())
+        except Exception:  # noqa: BLE001 - a destroyed context is not running
+            return False
 
     def _stamp(self):
         return self.node.get_clock().now().to_msg()
@@ -147,10 +161,13 @@ class MergeNode:
                 continue
             if s.known_init_poses and name not in s.init_poses:
                 self._once(("nopose", name),
+                           f"{name}: initial pose incomplete: {s.partial_init_poses[name]}; robot "
+                           f"skipped" if name in s.partial_init_poses else
                            f"{name}: no known initial pose: set {name}/map_merge/init_pose_x, _y, "
                            f"_yaw, or set known_init_poses to false; robot skipped")
                 continue
             self._add_robot(name, topic)
+        changed = False
         for name, r in self.robots.items():
             gone = name not in seen or self.node.count_publishers(r.topic) == 0
             if gone and not r.vanished:
@@ -158,7 +175,10 @@ class MergeNode:
                 self.log.warning(f"{name}: {r.topic} has no publisher any more; {kept}")
             elif r.vanished and not gone:
                 self.log.info(f"{name}: {r.topic} is published again")
+            changed |= r.vanished != gone
             r.vanished = gone
+        if changed:
+            self._publish_status()
 
     def _add_robot(self, name: str, topic: str) -> None:
         r = Robot(name, topic)
@@ -187,9 +207,14 @@ class MergeNode:
         try:
             grid = grid_from_msg(msg, name=r.name, max_cells=self.s.max_map_cells)
         except BadMap as exc:
-            self._once(("bad", r.name, str(exc)), f"{r.name}: map refused: {exc}; the robot is "
-                                                  f"skipped until a valid map arrives")
+            kept = ("its last valid map stays in the merge" if r.grid is not None else
+                    "the robot is skipped")
+            self._once(("bad", r.name, str(exc)), f"{r.name}: map refused: {exc}; {kept} until "
+                                                  f"a valid map arrives")
+            changed = r.problem != str(exc)
             r.problem = str(exc)
+            if changed:
+                self._publish_status()
             return
         if r.problem:
             self.log.info(f"{r.name}: valid map again")
@@ -306,6 +331,8 @@ class MergeNode:
                 last, done = time.monotonic(), version
                 self._publish_status()
             except Exception as exc:  # noqa: BLE001 - log once, go on
+                if not self._alive():
+                    break
                 self._once(("compose", type(exc).__name__), f"merged map not composed: {exc}", "error")
                 done = version
 
@@ -314,6 +341,8 @@ class MergeNode:
             try:
                 self._estimate_forever()
             except Exception as exc:  # noqa: BLE001 - log once, start over
+                if not self._alive():
+                    break
                 self._once(("estimate-loop", type(exc).__name__),
                            f"estimation stopped by {type(exc).__name__}: {exc}; restarting", "error")
                 self._stop.wait(1.0)
@@ -352,23 +381,29 @@ class MergeNode:
             except MergeCancelled:
                 break
             except FusionkitError as exc:
+                if not self._alive():
+                    break
                 self._once(("estimate", str(exc)), f"estimation failed: {exc}")
                 done = version
                 self._publish_status()
                 continue
             except Exception as exc:  # noqa: BLE001 - log once, go on
+                if not self._alive():
+                    break
                 self._once(("estimate", type(exc).__name__),
                            f"estimation failed: {type(exc).__name__}: {exc}", "error")
                 done = version
                 self._publish_status()
                 continue
+            if not self._alive():
+                break
             self.last_estimation_s = round(time.perf_counter() - t0, 3)
             self.estimations += 1
             done = version
             changed = False
             for d in decisions:
                 r = self.robots[d.robot]
-                moved = d.action in ("placed", "switched", "refined")
+                moved = d.action in ("placed", "switched", "refined", "dropped")
                 if (d.action, d.why) != (r.last_action, r.last_why) or moved:
                     self.log.info(d.line())
                 else:
