@@ -421,6 +421,16 @@ def test_the_status_is_published_while_the_reference_robot_is_missing(procs, run
     assert not any(r["placed"] for r in status["robots"].values())
     _wait(lambda: "waiting for the reference robot /nobody's map" in procs.log("node"), 60, procs,
           "the node to say what it waits for")
+
+    def with_maps():
+        sts = [s["status"] for s in _records(probe_out, "status")]
+        return next((s for s in sts if len(s["robots"]) == 3
+                     and all(r["map"] for r in s["robots"].values())), None)
+
+    # each robot's status says so too (its reason was empty)
+    status = _wait(with_maps, 60, procs, "a status with the three robots' maps")
+    assert all(r["reason"] == "waiting for the reference robot /nobody's map with a wall"
+               for r in status["robots"].values()), status
     assert procs.stop("play") == 0 and procs.stop("node") == 0
 
 

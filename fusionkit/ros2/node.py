@@ -262,15 +262,22 @@ class MergeNode:
         robots = {}
         with self._lock:
             items = list(self.robots.items())
+            ref = self.robots.get(self.reference) if self.reference else None
+            # a named reference robot not yet heard of (or without a wall): nothing is placed
+            no_ref = (self.reference is not None and not self.s.known_init_poses
+                      and (ref is None or not ref.walls))
         for name, r in items:
             held = self.tracker.held(name)
             waiting = r.grid is None   # its place may be known (the reference), its map is not
+            why = ("no valid map received yet" if waiting and not r.problem else
+                   r.last_why or (f"waiting for the reference robot {self.reference}'s map with a "
+                                  f"wall" if no_ref and held is None else ""))
             robots[name] = {
                 "topic": r.topic, "placed": held is not None and not waiting,
                 "transform": None if held is None else held[0].as_dict(4),
                 "confidence": None if held is None else round(held[1], 4),
                 "last_decision": r.last_action,
-                "reason": "no valid map received yet" if waiting and not r.problem else r.last_why,
+                "reason": why,
                 "map": None if r.grid is None else {"width": r.grid.cols, "height": r.grid.rows,
                                                     "resolution": r.grid.resolution},
                 "updates": r.updates, "problem": r.problem or None, "vanished": r.vanished}
