@@ -35,6 +35,17 @@ def test_help_lists_every_command_with_its_own_words_without_loading_the_heavy_p
     assert "docs/formats.md" in out and all(name in out for name in COMMANDS)
 
 
+def test_merge_node_help_gives_each_parameter_its_default_and_meaning(capsys):
+    """The node's warning for an unknown parameter sends the user to --help for the
+    parameters, which listed their names alone."""
+    with pytest.raises(SystemExit):
+        main(["ros2", "merge-node", "--help"])
+    text = capsys.readouterr().out
+    assert "min_confidence (0.5): least confidence (0-1) for a robot to be placed" in text
+    assert "known_init_poses (false):" in text and "world_frame ('world'):" in text
+    assert "/<robot>/map_merge/init_pose_x, _y, _z, _yaw" in text
+
+
 def test_help_cites_the_shipped_formats_document_not_a_contract_section(capsys):
     for name in COMMANDS:
         with pytest.raises(SystemExit):

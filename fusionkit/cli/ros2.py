@@ -29,13 +29,14 @@ def register(sub) -> None:
             "max_map_cells), set as ROS 2 users set them: --ros-args -p NAME:=VALUE, "
             "--params-file FILE.yaml.",
             "It discovers robots by their map topics, estimates their transforms in a worker "
-            "thread, keeps each accepted transform until a confidently better one comes, and "
+            "thread, keeps each accepted transform until a confidently better one comes (and "
+            "only while it still fits the current maps), and "
             "publishes the merged map (latched), each robot's transform on "
             "/map_merge/<robot>/transform (geometry_msgs/PoseStamped) and a JSON status on "
             "/map_merge/status (std_msgs/String). Ctrl-C stops it. Exit status: 0 stopped, "
             "2 bad input."),
-        epilog="example: fusionkit ros2 merge-node --ros-args -p discovery_rate:=1.0 "
-               "-p estimation_rate:=0.5")
+        epilog=_parameters_help() + "\n\nexample: fusionkit ros2 merge-node --ros-args "
+               "-p discovery_rate:=1.0 -p estimation_rate:=0.5")
     m.add_argument("--params-file", action="append", default=[], metavar="FILE.yaml",
                    help="ROS 2 parameter file (map_merge: ros__parameters: ...); may be repeated")
     m.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], metavar="ARG",
@@ -62,6 +63,24 @@ def register(sub) -> None:
     pl.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], metavar="ARG",
                     help="ROS arguments, to the end of the line")
     pl.set_defaults(func=_play)
+
+
+def _parameters_help() -> str:
+    """The node's parameters, each with its default and meaning, for ``--help``."""
+    import textwrap
+
+    from ..ros2._params import PARAMETERS
+
+    lines = ["parameters (-p NAME:=VALUE; default, meaning):"]
+    for name, (default, _kind, meaning) in PARAMETERS.items():
+        shown = str(default).lower() if isinstance(default, bool) else repr(default) \
+            if isinstance(default, str) else f"{default:g}" if isinstance(default, float) else default
+        lines += textwrap.wrap(f"{name} ({shown}): {meaning}", width=88, initial_indent="  ",
+                               subsequent_indent="      ")
+    lines += textwrap.wrap("/<robot>/map_merge/init_pose_x, _y, _z, _yaw: a robot's known "
+                           "initial pose, read with known_init_poses true (_z is ignored)",
+                           width=88, initial_indent="  ", subsequent_indent="      ")
+    return "\n".join(lines)
 
 
 def _merge_node(args) -> int:
