@@ -74,6 +74,9 @@ def replaced_run_files(out: Path, keep, inputs=(), more=()) -> list[Path]:
     (:func:`merges_of_run`) and ``more``; never a file of ``keep`` nor of ``inputs``."""
     if not out.is_dir():
         return []
+    # a write of a run killed mid-way is finished or undone first: its truth.json, taken away
+    # at the kill, names the robots whose files are then left over
+    recover_set(out / "truth.json", _LEFTOVER)
     kept = {Path(q).resolve() for q in [*keep, *inputs]}
     return [p for p in dict.fromkeys([*_previous_robot_files(out), *map(Path, more),
                                       *merges_of_run(out)])

@@ -520,6 +520,54 @@ def test_a_run_killed_while_written_is_finished_or_undone_by_the_next_write(tmp_
         assert {p.name: p.read_bytes() for p in out.iterdir()} == new, f"killed at rename {k}"
 
 
+_IMPORT_CHILD = textwrap.dedent("""
+    import os, signal, sys
+    from pathlib import Path
+    from fusionkit import _atomic
+    from fusionkit.io_carmen import import_carmen
+    log, out, k = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3])
+    real, calls = os.replace, []
+    def killed(src, dst):
+        calls.append(dst)
+        if len(calls) == k:
+            os.kill(os.getpid(), signal.SIGKILL)
+        return real(src, dst)
+    _atomic.os.replace = killed
+    import_carmen(log, out, split=2, overwrite=True)
+""")
+
+
+def test_a_split_import_killed_over_an_earlier_one_leaves_none_of_its_sessions_behind(tmp_path):
+    """``import carmen --split 2 --force`` killed over a folder of ``--split 3``, then run
+    again: it wrote the two new sessions and left the earlier robot_3, whose files then
+    loaded and merged as one of the new run's (the truth.json naming it had been taken away at
+    the kill, so the new write did not know it for the earlier run's)."""
+    from fusionkit.io_carmen import import_carmen
+
+    log = tmp_path / "tiny.log"
+    lines = [f"FLASER 5 1.0 2.0 1.5 2.5 1.2 {0.1 * k:.2f} 0.0 0.0 {0.1 * k:.2f} 0.0 0.0 {k}.0 "
+             f"host {k}.0" for k in range(60)]
+    log.write_text("\n".join(lines) + "\n")
+    clean = tmp_path / "clean"
+    calls = []
+    real = os.replace
+    _atomic.os.replace = lambda src, dst: (calls.append(dst), real(src, dst))[1]
+    try:
+        import_carmen(log, clean, split=2)
+    finally:
+        _atomic.os.replace = real
+    new = {p.name: p.read_bytes() for p in clean.iterdir()}
+    for k in range(1, len(calls) + 1):
+        out = tmp_path / f"k{k}"
+        import_carmen(log, out, split=3)
+        proc = subprocess.run([sys.executable, "-c", _IMPORT_CHILD, str(log), str(out), str(k)],
+                              cwd=ROOT, capture_output=True, timeout=120,
+                              env={**os.environ, "NUMBA_THREADING_LAYER": "threadsafe"})
+        assert proc.returncode == -signal.SIGKILL, proc.stderr.decode()[-2000:]
+        import_carmen(log, out, split=2, overwrite=True)
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == new, f"killed at rename {k}"
+
+
 def test_a_full_disk_is_said_of_the_file_that_did_not_fit(tmp_path, monkeypatch):
     """The disk filling while an image was written was reported as the report (the set's last
     file) failing: "merged.report.json: cannot be written (No space left on device)"."""
