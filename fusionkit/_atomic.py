@@ -251,19 +251,28 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
                     writing = p
                     _write_durable(tmp, payload)
                 with _signals.deferred():
-                    if _commit(items, commit_path, commit_payload, staged, hide, token):
-                        COMMITTED.append(commit_path)   # before a held-back signal comes
+                    try:
+                        if _commit(items, commit_path, commit_payload, staged, hide, token):
+                            COMMITTED.append(commit_path)   # before a held-back signal comes
+                    finally:
+                        # before a held-back signal is sent again: raised in the loop below,
+                        # it would cut it short and leave temporary files behind
+                        _unlink_all(staged)
             finally:
-                for tmp in staged:
-                    if tmp is not None:
-                        with contextlib.suppress(OSError):
-                            tmp.unlink()
+                _unlink_all(staged)
     except OSError as exc:
         failed = Path(exc.filename) if getattr(exc, "filename", None) else writing
         for t in targets:  # name the target, not its temporary file
             if failed.name.startswith(f".{t.name}."):
                 failed = t
         raise _write_error(failed, exc) from None
+
+
+def _unlink_all(paths) -> None:
+    for tmp in paths:
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
 
 
 def _commit(items, commit_path: Path, commit_payload: bytes, staged, hide, token) -> bool:
@@ -382,8 +391,11 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
                     os.fsync(fh.fileno())
                 os.chmod(tmp, 0o644)
                 with _signals.deferred():
-                    os.replace(tmp, target)
-                    _fsync_dir(_parent(target))
+                    try:
+                        os.replace(tmp, target)
+                        _fsync_dir(_parent(target))
+                    finally:
+                        _unlink_all([tmp])
             finally:
                 with contextlib.suppress(OSError):
                     tmp.unlink()
