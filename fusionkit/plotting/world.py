@@ -135,7 +135,8 @@ def plot_scan(log, index: int, *, grid: OccupancyGrid | None = None, every: int 
     ax_sig.set_ylabel("range (m)")
     ax_sig.set_xlim(deg[0], deg[-1])
     ax_sig.set_ylim(0, log.range_max * 1.08)
-    ax_sig.set_title(f"The scan as a signal f(x), x = beam 0..{log.n_beams - 1} (input of eq. 1)")
+    ax_sig.set_title(f"The scan as a signal f(x): the range of each of its {log.n_beams} beams, "
+                     f"by angle (input of eq. 1)")
     ax_sig.legend(loc="lower right", fontsize=8, framealpha=0.9)
     ax_sig.grid(alpha=0.3)
     return fig
