@@ -27,6 +27,7 @@ class Robot:
     vanished: bool = False
     last_action: str = ""
     last_why: str = ""
+    judged: OccupancyGrid | None = None   # the map its held transform was last judged on
     sub: object = None
     pose_pub: object = None
 

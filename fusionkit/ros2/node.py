@@ -290,6 +290,16 @@ class MergeNode:
     def _publish_status(self) -> None:
         self.status_pub.publish(self._String(data=json.dumps(self.status(), sort_keys=True)))
 
+    def _shown(self, name: str, r: Robot):
+        """The map of robot ``name`` that the merged map shows (call with the lock held): the
+        reference's and, with known initial poses, every robot's latest map with a known cell;
+        else the map its held transform was last judged on by an estimation (a new map at the
+        old transform, before it is judged, could lay a restarted robot's map across the
+        others')."""
+        if name == self.reference or self.s.known_init_poses:
+            return r.grid if r.grid is not None and r.known else None
+        return r.judged
+
     def _compose_loop(self) -> None:
         period = 1.0 / self.s.merging_rate
         done = (-1, -1)
@@ -312,8 +322,8 @@ class MergeNode:
             try:
                 with self._lock:
                     version = (self._map_version, self._held_version)
-                    placed = [(r.grid, self.tracker.held(n)) for n, r in self.robots.items()
-                              if r.grid is not None and r.known and self.tracker.held(n) is not None]
+                    placed = [(self._shown(n, r), self.tracker.held(n)) for n, r in self.robots.items()
+                              if self._shown(n, r) is not None and self.tracker.held(n) is not None]
                     first = self.reference
                     ref_grid = self.robots[first].grid if first in self.robots else None
                 if not placed:
@@ -408,9 +418,16 @@ class MergeNode:
             self.estimations += 1
             done = version
             changed = False
+            grids = dict(snapshot)
             for d in decisions:
                 r = self.robots[d.robot]
                 moved = d.action in ("placed", "switched", "refined", "dropped")
+                with self._lock:
+                    # the map the held transform was just judged on: the merged map shows it
+                    judged = grids[d.robot] if d.transform is not None else None
+                    if judged is not r.judged:
+                        r.judged = judged
+                        changed = True
                 if (d.action, d.why) != (r.last_action, r.last_why) or moved:
                     self.log.info(d.line())
                 else:
