@@ -346,6 +346,7 @@ def test_known_init_poses_from_a_map_merge_params_file(procs, run3, tmp_path):
             /robot_2/map_merge/init_pose_y: 1.0
             /robot_2/map_merge/init_pose_z: 0.0
             /robot_2/map_merge/init_pose_yaw: 1.5
+            /robot_3/map_merge/init_pose_x: 2.0
         """))
     probe_out = tmp_path / "probe.jsonl"
     procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
@@ -354,8 +355,19 @@ def test_known_init_poses_from_a_map_merge_params_file(procs, run3, tmp_path):
     procs.start("play", FUSIONKIT + ["ros2", "play", str(run3), "--duration", "0", "--steps", "1"])
     _wait(lambda: {p["robot"] for p in _records(probe_out, "pose")} >= {"robot_1", "robot_2"}
           and _records(probe_out, "map"), 60, procs, "the known poses and the merged map")
-    _wait(lambda: "/robot_3: no known initial pose" in procs.log("node"), 30, procs,
+    # robot_3's pose is half given: as map_merge, that robot is skipped, not the node stopped
+    _wait(lambda: "/robot_3: initial pose incomplete: give /robot_3/map_merge/init_pose_y, "
+                  "/robot_3/map_merge/init_pose_yaw too" in procs.log("node"), 30, procs,
           "robot_3 to be skipped")
+
+    def skipped():
+        sts = [s["status"] for s in _records(probe_out, "status")]
+        return next((s for s in reversed(sts) if "/robot_3" in s["robots"]), None)
+
+    status = _wait(skipped, 30, procs, "robot_3 in the status")
+    assert status["robots"]["/robot_3"]["last_decision"] == "skipped"
+    assert not status["robots"]["/robot_3"]["placed"]
+    assert "initial pose incomplete" in status["robots"]["/robot_3"]["reason"]
     assert procs.stop("node") == 0
     poses = {p["robot"]: p for p in _records(probe_out, "pose")}
     assert (poses["robot_2"]["x"], poses["robot_2"]["y"]) == (-3.0, 1.0)

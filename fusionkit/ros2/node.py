@@ -84,6 +84,7 @@ class MergeNode:
         self._map_version = 0       # bumped by every accepted map message
         self._held_version = 0      # bumped by every change of a held transform
         self._warned: set = set()
+        self.skipped: dict[str, tuple[str, str]] = {}   # robots left out at discovery: (topic, why)
         self.merged_pub = node.create_publisher(GridMsg, settings.merged_map_topic, latched_qos())
         self.merged_topic = self.merged_pub.topic_name
         self.status_pub = node.create_publisher(String, "~/status", latched_qos())
@@ -160,11 +161,15 @@ class MergeNode:
             if name in self.robots:
                 continue
             if s.known_init_poses and name not in s.init_poses:
-                self._once(("nopose", name),
-                           f"{name}: initial pose incomplete: {s.partial_init_poses[name]}; robot "
-                           f"skipped" if name in s.partial_init_poses else
-                           f"{name}: no known initial pose: set {name}/map_merge/init_pose_x, _y, "
-                           f"_yaw, or set known_init_poses to false; robot skipped")
+                why = (f"initial pose incomplete: {s.partial_init_poses[name]}"
+                       if name in s.partial_init_poses else
+                       f"no known initial pose: set {name}/map_merge/init_pose_x, _y, _yaw, or "
+                       f"set known_init_poses to false")
+                self._once(("nopose", name), f"{name}: {why}; robot skipped")
+                if name not in self.skipped:
+                    with self._lock:
+                        self.skipped[name] = (topic, why)
+                    self._publish_status()
                 continue
             self._add_robot(name, topic)
         changed = False
@@ -281,6 +286,12 @@ class MergeNode:
                 "map": None if r.grid is None else {"width": r.grid.cols, "height": r.grid.rows,
                                                     "resolution": r.grid.resolution},
                 "updates": r.updates, "problem": r.problem or None, "vanished": r.vanished}
+        with self._lock:
+            skipped = dict(self.skipped)
+        for name, (topic, why) in skipped.items():
+            robots[name] = {"topic": topic, "placed": False, "transform": None, "confidence": None,
+                            "last_decision": "skipped", "reason": why, "map": None, "updates": 0,
+                            "problem": None, "vanished": False}
         return {"reference": self.reference, "world_frame": self.s.world_frame,
                 "method": "known_init_poses" if self.s.known_init_poses else self.s.method,
                 "estimations": self.estimations, "last_estimation_seconds": self.last_estimation_s,
