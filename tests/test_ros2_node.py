@@ -414,6 +414,22 @@ def test_stopped_while_it_starts_a_ros2_command_ends_with_exit_0(procs, run3, ar
     assert "Traceback" not in procs.log("cmd")
 
 
+def test_robots_already_publishing_are_found_within_seconds_at_the_default_discovery_rate(
+        procs, run3):
+    """The discovery made as the node starts finds no robot (the ROS graph is not known to it
+    yet), and the next one came a whole discovery period later: 20 s at the default rate."""
+    procs.start("play", FUSIONKIT + ["ros2", "play", str(run3), "--duration", "0", "--steps", "1",
+                                     "--hold", "60"])
+    _wait(lambda: "last maps published" in procs.log("play"), 60, procs, "the maps to be published")
+    procs.start("node", MERGE_NODE)
+    _wait(lambda: "map merging started" in procs.log("node"), 60, procs, "the node to start")
+    started = time.monotonic()
+    _wait(lambda: all(f"/robot_{k}: subscribed to /robot_{k}/map" in procs.log("node")
+                      for k in (1, 2, 3)), 15, procs, "the three robots to be found")
+    assert time.monotonic() - started < 15
+    assert procs.stop("node") == 0 and procs.stop("play") == 0
+
+
 def test_the_status_is_published_while_the_reference_robot_is_missing(procs, run3, tmp_path):
     """With ``reference_robot`` naming a robot that never comes, nothing can be placed; the
     status still says which robots are there and that none is placed."""

@@ -42,7 +42,7 @@ PARAMETERS: dict = {
     "switch_confirmations": (2, "count", "successive estimations that must agree before an accepted "
                                          "transform is replaced"),
     "reference_robot": ("", "str", "robot whose map frame is the merged frame (default: the first "
-                                   "robot discovered)"),
+                                   "robot whose valid map with a wall arrives)"),
     "seed": (0, "count", "seed of every random step of the estimation"),
     "max_map_cells": (16_000_000, "count", "larger maps are refused (logged once, robot skipped)"),
 }

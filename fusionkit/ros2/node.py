@@ -102,6 +102,12 @@ class MergeNode:
             self.log.warning(f"{robot}: initial pose incomplete: {what}; the robot will be skipped")
         self._discover()
         node.create_timer(1.0 / settings.discovery_rate, self._guard(self._discover))
+        # at start the ROS graph is not yet known to this node (the discovery above finds no
+        # robot): look again every second for the first EARLY_DISCOVERIES seconds, so that
+        # robots already publishing are not waited for a whole discovery period (20 s)
+        self._early_left = EARLY_DISCOVERIES if settings.discovery_rate < 1.0 else 0
+        self._early = node.create_timer(1.0, self._guard(self._early_discover)) \
+            if self._early_left else None
         self._threads = [threading.Thread(target=self._compose_loop, name="compose", daemon=True)]
         if not settings.known_init_poses:
             self._threads.append(threading.Thread(target=self._estimate_loop, name="estimate",
@@ -148,6 +154,12 @@ class MergeNode:
         return self.node.get_clock().now().to_msg()
 
     # -- discovery and subscriptions (executor thread) ----------------------------------------
+    def _early_discover(self) -> None:
+        self._early_left -= 1
+        if self._early_left <= 0 and self._early is not None:
+            self._early.cancel()
+        self._discover()
+
     def _discover(self) -> None:
         s = self.s
         seen = set()
@@ -460,6 +472,10 @@ class MergeNode:
         self._wake_compose.set()
         for t in self._threads:
             t.join(timeout)
+
+
+#: Discoveries made once a second after start, before the discovery_rate timer takes over
+EARLY_DISCOVERIES = 10
 
 
 def _identity():
