@@ -397,8 +397,7 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
                     finally:
                         _unlink_all([tmp])
             finally:
-                with contextlib.suppress(OSError):
-                    tmp.unlink()
+                _unlink_all([tmp])
     except OSError as exc:
         raise _write_error(target, exc) from None
 

@@ -370,8 +370,8 @@ def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
     if no_return.all():
         # nothing returned from a wall: the map would be all free floor, no wall to merge on
         shortest = float(np.min(np.where(np.isfinite(ranges), ranges, np.inf)))
-        if config.max_range is not None and shortest >= config.max_range and (
-                sentinel is None or shortest < sentinel * (1.0 - NO_RETURN_BAND)):
+        # the shortest reading is no return by --max-range alone, not by the scanner's value
+        if sentinel is None or shortest < sentinel * (1.0 - NO_RETURN_BAND):
             raise InputError(f"{_short(path)}: every reading is at or beyond --max-range "
                              f"{config.max_range:g} m (the shortest is {shortest:.2f} m): give the "
                              f"scanner's usable range, or leave --max-range out")

@@ -455,21 +455,26 @@ def test_a_failed_write_takes_back_the_folders_it_made(tmp_path, monkeypatch, ca
         (["tiny.log"] if command == "import" else [])
 
 
-_RUN_CHILD = textwrap.dedent("""
-    import os, pickle, signal, sys
-    from pathlib import Path
-    from fusionkit import _atomic
-    from fusionkit.sim_output import write_run
-    sim_file, out, k = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3])
-    real, calls = os.replace, []
-    def killed(src, dst):
-        calls.append(dst)
-        if len(calls) == k:
-            os.kill(os.getpid(), signal.SIGKILL)
-        return real(src, dst)
-    _atomic.os.replace = killed
-    write_run(pickle.loads(sim_file.read_bytes()), out)
-""")
+def _killed_at_rename(write: str) -> str:
+    """A child process that runs ``write`` (``src`` and ``out`` its first two arguments) and
+    kills itself with SIGKILL at its write's rename number ``sys.argv[3]``."""
+    return textwrap.dedent("""
+        import os, pickle, signal, sys
+        from pathlib import Path
+        from fusionkit import _atomic
+        src, out, k = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3])
+        real, calls = os.replace, []
+        def killed(a, b):
+            calls.append(b)
+            if len(calls) == k:
+                os.kill(os.getpid(), signal.SIGKILL)
+            return real(a, b)
+        _atomic.os.replace = killed
+    """) + write + "\n"
+
+
+_RUN_CHILD = _killed_at_rename("from fusionkit.sim_output import write_run\n"
+                               "write_run(pickle.loads(src.read_bytes()), out)")
 
 
 @pytest.fixture(scope="module")
@@ -520,21 +525,8 @@ def test_a_run_killed_while_written_is_finished_or_undone_by_the_next_write(tmp_
         assert {p.name: p.read_bytes() for p in out.iterdir()} == new, f"killed at rename {k}"
 
 
-_IMPORT_CHILD = textwrap.dedent("""
-    import os, signal, sys
-    from pathlib import Path
-    from fusionkit import _atomic
-    from fusionkit.io_carmen import import_carmen
-    log, out, k = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3])
-    real, calls = os.replace, []
-    def killed(src, dst):
-        calls.append(dst)
-        if len(calls) == k:
-            os.kill(os.getpid(), signal.SIGKILL)
-        return real(src, dst)
-    _atomic.os.replace = killed
-    import_carmen(log, out, split=2, overwrite=True)
-""")
+_IMPORT_CHILD = _killed_at_rename("from fusionkit.io_carmen import import_carmen\n"
+                                  "import_carmen(src, out, split=2, overwrite=True)")
 
 
 def test_a_split_import_killed_over_an_earlier_one_leaves_none_of_its_sessions_behind(tmp_path):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Callable
 
@@ -63,11 +64,14 @@ def estimate_round(snapshot: list, reference: str, settings: NodeSettings, track
         p = result.placements[k]
         estimate = p.transform if p.merged else None
 
-        def score(t, _name=name):
-            return _score_against_others(grids, tracker, _name, t)
+        # the other held maps fused: made once for this robot, when a score first needs it
+        others = functools.cache(lambda _name=name: _others_fused(grids, tracker, _name))
 
-        def fits(t, _name=name):
-            return _confidence_against_others(grids, tracker, _name, t, settings.seed)
+        def score(t, _name=name, _others=others):
+            return _score_against(_others(), grids[_name], t)
+
+        def fits(t, _name=name, _others=others):
+            return _confidence_against(_others(), grids[_name], t, settings.seed)
 
         decisions.append(tracker.decide(name, estimate, float(p.confidence), p.reason,
                                         grids[name].resolution, score=score, fits=fits))
@@ -85,28 +89,25 @@ def _others_fused(grids: dict, tracker: Tracker, name: str):
     return fk.fuse_maps([g for g, _ in others], [t for _, t in others]).grid
 
 
-def _confidence_against_others(grids: dict, tracker: Tracker, name: str, transform,
-                               seed: int) -> float:
-    """The confidence the consensus test gives ``grids[name]`` placed by ``transform`` on the
-    other held maps fused (:func:`fusionkit.methods.consensus.placement_confidence`, 0-1: the
+def _confidence_against(fused, grid: OccupancyGrid, transform, seed: int) -> float:
+    """The confidence the consensus test gives ``grid`` placed by ``transform`` on ``fused``,
+    the other held maps (:func:`fusionkit.methods.consensus.placement_confidence`, 0-1: the
     scale of every method's confidence)."""
     from ..methods.consensus import placement_confidence, prepare_maps
     from ..pipeline import _same_resolution
 
-    fused = _others_fused(grids, tracker, name)
     if fused is None:
         return 0.0
-    a, b = prepare_maps(_same_resolution([fused, grids[name]], 0))
+    a, b = prepare_maps(_same_resolution([fused, grid], 0))
     return float(placement_confidence(a, b, transform, seed=seed))
 
 
-def _score_against_others(grids: dict, tracker: Tracker, name: str, transform) -> float:
-    """How well ``grids[name]`` placed by ``transform`` agrees with the other held maps fused
+def _score_against(fused, grid: OccupancyGrid, transform) -> float:
+    """How well ``grid`` placed by ``transform`` agrees with ``fused``, the other held maps
     (:func:`fusionkit.overlap_score`, 0-1)."""
     import fusionkit as fk
 
-    fused = _others_fused(grids, tracker, name)
     if fused is None:
         return 0.0
-    score, _cells = fk.overlap_score(fused, grids[name], transform)
+    score, _cells = fk.overlap_score(fused, grid, transform)
     return float(score)

@@ -279,6 +279,7 @@ class MergeNode:
         robots = {}
         with self._lock:
             items = list(self.robots.items())
+            skipped = dict(self.skipped)
             ref = self.robots.get(self.reference) if self.reference else None
             # a named reference robot not yet heard of (or without a wall): nothing is placed
             no_ref = (self.reference is not None and not self.s.known_init_poses
@@ -298,8 +299,6 @@ class MergeNode:
                 "map": None if r.grid is None else {"width": r.grid.cols, "height": r.grid.rows,
                                                     "resolution": r.grid.resolution},
                 "updates": r.updates, "problem": r.problem or None, "vanished": r.vanished}
-        with self._lock:
-            skipped = dict(self.skipped)
         for name, (topic, why) in skipped.items():
             robots[name] = {"topic": topic, "placed": False, "transform": None, "confidence": None,
                             "last_decision": "skipped", "reason": why, "map": None, "updates": 0,
@@ -345,8 +344,9 @@ class MergeNode:
             try:
                 with self._lock:
                     version = (self._map_version, self._held_version)
-                    placed = [(self._shown(n, r), self.tracker.held(n)) for n, r in self.robots.items()
-                              if self._shown(n, r) is not None and self.tracker.held(n) is not None]
+                    placed = [(g, h) for n, r in self.robots.items()
+                              if (g := self._shown(n, r)) is not None
+                              and (h := self.tracker.held(n)) is not None]
                     first = self.reference
                     ref_grid = self.robots[first].grid if first in self.robots else None
                 if not placed:

@@ -94,10 +94,8 @@ def _polish_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, mi
             pairs = m
             if m < min_pairs:
                 return tx, ty, th, m
-            ntx, nty, nth = _fit_pairs(src, dst, m, sx / m, sy / m, dx / m, dy / m)
-            moved = abs(ntx - tx) + abs(nty - ty)
-            turned = abs(math.atan2(math.sin(nth - th), math.cos(nth - th)))
-            tx, ty, th = ntx, nty, nth
+            tx, ty, th, moved, turned = _fit_pairs(src, dst, m, sx / m, sy / m, dx / m, dy / m,
+                                                   tx, ty, th)
             if moved < 0.01 and turned < 1e-5:
                 break
     return tx, ty, th, pairs

@@ -57,11 +57,9 @@ def _icp_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, min_p
     """ICP in A's cell frame (units: cells). ``pts`` are B's points already in cell units of a
     frame aligned with A's cells; only points landing on cells whose ``gated`` distance (the
     distance to A's nearest wall where A is usable, infinite elsewhere) is within the gate are
-    paired. Returns ``(tx, ty, th, pairs)`` of the final motion.
-
-    Each step moves B's points into cells in one loop (which the compiler vectorises), pairs
-    them in a second and keeps the pairs (B's point and its wall) for the closed-form fit,
-    which then runs over the pairs alone."""
+    paired. Returns ``(tx, ty, th, pairs)`` of the final motion. Each step moves B's points into
+    cells in one loop (which the compiler vectorises), pairs them in a second and fits the pairs
+    kept (B's point and its wall) in closed form (:func:`_fit_pairs`)."""
     rows, cols = gated.shape
     n = pts.shape[0]
     src = np.empty((n, 2))
@@ -104,19 +102,18 @@ def _icp_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, min_p
             pairs = m
             if m < min_pairs:
                 return tx, ty, th, m
-            ntx, nty, nth = _fit_pairs(src, dst, m, sx / m, sy / m, dx / m, dy / m)
-            moved = abs(ntx - tx) + abs(nty - ty)
-            turned = abs(math.atan2(math.sin(nth - th), math.cos(nth - th)))
-            tx, ty, th = ntx, nty, nth
+            tx, ty, th, moved, turned = _fit_pairs(src, dst, m, sx / m, sy / m, dx / m, dy / m,
+                                                   tx, ty, th)
             if moved < settle and turned < 1e-4:
                 break
     return tx, ty, th, pairs
 
 
 @njit
-def _fit_pairs(src, dst, m, sx, sy, dx, dy):
+def _fit_pairs(src, dst, m, sx, sy, dx, dy, tx, ty, th):
     """The rigid motion ``(tx, ty, theta)`` fitting ``src[:m]`` to ``dst[:m]`` (as
-    :func:`rigid_fit`), ``(sx, sy)`` and ``(dx, dy)`` their centroids."""
+    :func:`rigid_fit`), ``(sx, sy)`` and ``(dx, dy)`` their centroids, and how far it moved and
+    turned from the last one ``(tx, ty, th)``: ``(tx, ty, theta, moved, turned)``."""
     num = 0.0
     den = 0.0
     for k in range(m):
@@ -126,10 +123,13 @@ def _fit_pairs(src, dst, m, sx, sy, dx, dy):
         qy = dst[k, 1] - dy
         num += px * qy - py * qx
         den += px * qx + py * qy
-    th = math.atan2(num, den)
-    c = math.cos(th)
-    s = math.sin(th)
-    return dx - (c * sx - s * sy), dy - (s * sx + c * sy), th
+    nth = math.atan2(num, den)
+    c = math.cos(nth)
+    s = math.sin(nth)
+    ntx = dx - (c * sx - s * sy)
+    nty = dy - (s * sx + c * sy)
+    return (ntx, nty, nth, abs(ntx - tx) + abs(nty - ty),
+            abs(math.atan2(math.sin(nth - th), math.cos(nth - th))))
 
 
 def _gated(a: MapIndex) -> np.ndarray:
