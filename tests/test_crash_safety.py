@@ -398,7 +398,8 @@ def test_ctrl_c_during_start_up_is_one_line_and_exit_130(monkeypatch, capsys):
         for s, h in saved.items():
             signal.signal(s, h)
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and err.startswith("fusionkit: interrupted")
+    # the command is named though its parser was never built
+    assert err == "fusionkit merge: interrupted; no output was left half-written\n"
 
 
 def test_an_export_sweeps_the_temporary_folder_a_killed_export_left(tmp_path):

@@ -147,6 +147,9 @@ def _main(argv) -> int:
     try:
         _signals.install()
         argv = sys.argv[1:] if argv is None else list(argv)
+        named = _command_of(argv)
+        if named:   # an interrupt while the command's modules load still names it
+            command = f"fusionkit {named}"
         parser = build_parser(argv)
         args, extra = parser.parse_known_args(argv)
         if extra:   # said by the (sub)command they were given to
