@@ -76,7 +76,6 @@ def plot_on_truth(ax, fused: OccupancyGrid, world: OccupancyGrid, transform, *,
     ground truth: walls on true walls black, walls where the world has none red, true walls the
     map missed blue, mapped free space pale green."""
     from matplotlib.colors import ListedColormap
-    from matplotlib.patches import Patch
 
     placed = resample(fused, transform, world).data
     img = np.zeros(world.shape, np.int8)
@@ -95,11 +94,14 @@ def plot_on_truth(ax, fused: OccupancyGrid, world: OccupancyGrid, transform, *,
     if title:
         ax.set_title(title)
     if legend:
-        labels = ("unknown in both", "known in the world only", "free in the map",
-                  "true wall the map misses", "wall off the truth", "wall on the truth")
-        ax.legend(handles=[Patch(facecolor=c, edgecolor="0.3", label=s)
-                           for c, s in zip(_TRUTH_COLOURS[1:], labels[1:])],
-                  loc="upper right", fontsize=7, framealpha=0.9)
+        ax.legend(handles=_truth_handles(), loc="upper right", fontsize=7, framealpha=0.9)
+
+
+def _truth_handles():
+    """Legend entries of :func:`plot_on_truth`'s colours (all but the plain unknown)."""
+    labels = ("unknown in both", "known in the world only", "free in the map",
+              "true wall the map misses", "wall off the truth", "wall on the truth")
+    return _legend_patches(_TRUTH_COLOURS[1:], labels[1:])
 
 
 def _payload_grid(p: dict) -> OccupancyGrid:
@@ -131,7 +133,7 @@ def plot_bench_case(record: dict, *, cols: int = 3):
     rows = int(np.ceil(len(methods) / cols))
     known = np.nonzero(world.known_mask())
     aspect = (np.ptp(known[0]) + 1) / max(np.ptp(known[1]) + 1, 1)
-    fig = _new_figure(5.2 * cols, 5.2 * aspect * rows + 0.8)
+    fig = _new_figure(max(5.2 * cols, 6.5), 5.2 * aspect * rows + 1.4)
     axes = np.atleast_1d(fig.subplots(rows, cols)).ravel()
     word = {"success": "right", "wrong": "WRONG", "refused": "refused"}
     for i, (ax, m) in enumerate(zip(axes, methods)):
@@ -139,7 +141,7 @@ def plot_bench_case(record: dict, *, cols: int = 3):
         states = ", ".join(f"map {e['map'] + 1} {word.get(e['status'], e['status'])}"
                            for e in rec["maps"])
         plot_on_truth(ax, _payload_grid(grids["fused"][m]), world, ref_true,
-                      title=f"{m}\n{states}", legend=(i == len(methods) - 1))
+                      title=f"{m}\n{states}", legend=False)
         ax.title.set_fontsize(9)
         r0, r1 = known[0].min(), known[0].max() + 1
         c0, c1 = known[1].min(), known[1].max() + 1
@@ -148,9 +150,12 @@ def plot_bench_case(record: dict, *, cols: int = 3):
         ax.set_ylim(oy + r0 * res, oy + r1 * res)
     for ax in axes[len(methods):]:
         ax.set_visible(False)
+    # the legend and the title outside the panels: a map fills its panel up to the corners
+    fig.legend(handles=_truth_handles(), loc="outside lower center", ncols=min(5, 2 * cols + 1),
+               fontsize=8, framealpha=0.9)
     fig.suptitle(f"Case {record['index']}: {record['robots']} maps of {record['world']} "
-                 f"({record['mode']}), each method's fused map placed in the world by the "
-                 f"reference map's true pose")
+                 f"({record['mode']});\neach method's fused map placed in the world by the "
+                 f"reference map's true pose", fontsize=11)
     return fig
 
 
@@ -169,7 +174,7 @@ def plot_bench_summary(summary: dict, *, by: str = "mode"):
     matplotlib.figure.Figure
     """
     methods = list(summary["methods"])
-    fig = _new_figure(15.0, 0.55 * len(methods) + 3.2)
+    fig = _new_figure(15.0, 0.55 * len(methods) + 3.8)
     a1, a2 = fig.subplots(1, 2)
     y = np.arange(len(methods))[::-1]
     left = np.zeros(len(methods))
@@ -181,7 +186,8 @@ def plot_bench_summary(summary: dict, *, by: str = "mode"):
     a1.set_yticks(y, methods)
     a1.set_xlabel("pairs (a map and its reference)")
     a1.set_title("Outcome of every pair, per method")
-    a1.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    # legends under the axes: a bar may run to the axes' edge
+    a1.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncols=3, fontsize=8)
     a1.grid(axis="x", alpha=0.3)
     groups = list(summary["by"][by])
     width = 0.8 / max(len(groups), 1)
@@ -196,6 +202,6 @@ def plot_bench_summary(summary: dict, *, by: str = "mode"):
     a2.set_xlim(0, 100)
     a2.set_xlabel("success rate (%) of the linked pairs")
     a2.set_title(f"Success rate by {by}")
-    a2.legend(loc="lower right", fontsize=8, framealpha=0.9)
+    a2.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncols=min(len(groups), 6), fontsize=8)
     a2.grid(axis="x", alpha=0.3)
     return fig

@@ -48,11 +48,15 @@ def plot_fused(ax, fused, names=None, *, step: int | None = None, title: str | N
     if title is not None:
         ax.set_title(title)
     if legend:
-        from matplotlib.colors import to_rgb
+        state_legend(ax, _owner_patches(names, used), free=False)
 
-        tints = [1.0 - _TINT * (1.0 - np.array(to_rgb(robot_colour(k)))) for k in used]
-        state_legend(ax, _legend_patches(tints, [f"free, first seen by {names[k]}" for k in used]),
-                     free=False)
+
+def _owner_patches(names, used):
+    """Legend entries of the robots' tints, in the order ``used``."""
+    from matplotlib.colors import to_rgb
+
+    tints = [1.0 - _TINT * (1.0 - np.array(to_rgb(robot_colour(k)))) for k in used]
+    return _legend_patches(tints, [f"free, first seen by {names[k]}" for k in used])
 
 
 def plot_merge(result, maps, *, names=None, title: str | None = None):
@@ -131,8 +135,7 @@ def plot_cell_fusion(m1, m2, fused, *, names=("M1", "M2", "M_fusion")):
     axes = fig.subplots(1, 3)
     for ax, d, name in zip(axes, (m1, m2, fused), names):
         plot_cells(ax, d, title=name)
-    state_legend(axes[2], loc="upper left", fontsize=7)
-    axes[2].get_legend().set_bbox_to_anchor((1.02, 1.0))
+    state_legend(axes[2], fontsize=7)
     return fig
 
 
@@ -160,10 +163,12 @@ def plot_fusion_steps(fused, names=None, *, metrics=None, title: str | None = No
             m = metrics[i]
             t += (f"\ncompleteness {format_percent(m.completeness, 1)}%, "
                   f"precision {format_percent(m.precision, 1)}%")
-        plot_fused(ax, fused, names, step=i, title=t, legend=(i == n - 1))
+        plot_fused(ax, fused, names, step=i, title=t, legend=False)
         ax.title.set_fontsize(9)
     for ax in axes[n:]:
         ax.set_visible(False)
+    # one legend under the panels, where it covers no map and leaves the panels one size
+    state_legend(fig, _owner_patches(names, order[:n]), free=False, fontsize=8)
     fig.suptitle(title if title is not None else
                  "The fused map growing, one map per step (free cells tinted by the robot that first saw them)")
     return fig

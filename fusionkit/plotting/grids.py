@@ -94,15 +94,26 @@ def _legend_patches(colours, labels):
     return [Patch(facecolor=c, edgecolor="0.3", label=s) for c, s in zip(colours, labels)]
 
 
-def state_legend(ax, extra=(), *, loc="upper right", fontsize=7, free: bool = True):
+def state_legend(ax, extra=(), *, loc="outside", fontsize=7, free: bool = True):
     """Add a legend of the three cell states (free white, unknown grey, occupied black),
-    after the ``extra`` legend handles; ``free=False`` leaves the free entry out."""
+    after the ``extra`` legend handles; ``free=False`` leaves the free entry out. By default
+    (``loc="outside"``) it stands right of the axes, where it covers no part of the map;
+    any other ``loc`` places it inside the axes, as :meth:`matplotlib.axes.Axes.legend` does.
+    Given a figure for ``ax``, the legend stands under all of its panels."""
+    from matplotlib.figure import Figure
     from matplotlib.patches import Patch
 
     handles = list(extra) + ([Patch(facecolor="white", edgecolor="0.3", label="free")] if free else [])
     handles += [Patch(facecolor=(0.78, 0.78, 0.78), edgecolor="0.3", label="unknown"),
                 Patch(facecolor="black", edgecolor="0.3", label="occupied")]
-    ax.legend(handles=handles, loc=loc, fontsize=fontsize, framealpha=0.9)
+    if isinstance(ax, Figure):   # a figure's legend: under all its panels
+        ax.legend(handles=handles, loc="outside lower center", ncols=min(len(handles), 4),
+                  fontsize=fontsize, framealpha=0.9)
+    elif loc == "outside":
+        ax.legend(handles=handles, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                  fontsize=fontsize, framealpha=0.9)
+    else:
+        ax.legend(handles=handles, loc=loc, fontsize=fontsize, framealpha=0.9)
 
 
 def owner_image(grid: OccupancyGrid, owner: np.ndarray, *, known=None) -> np.ndarray:

@@ -191,5 +191,5 @@ def plot_worlds(worlds, *, cols: int = 4):
         ax.title.set_fontsize(10)
     for ax in axes[len(worlds):]:
         ax.set_visible(False)
-    state_legend(axes[len(worlds) - 1])
+    state_legend(fig)
     return fig
