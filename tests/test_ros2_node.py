@@ -520,3 +520,49 @@ def test_a_map_that_changes_nothing_merged_does_not_send_the_merged_map_again(pr
     maps = _records(probe_out, "map")
     assert len(maps) == 1, maps
     assert maps[0]["occupied"] == int(fk.load_map(run3 / "robot_1.yaml").occupied_mask().sum())
+
+
+def test_a_dropped_robot_leaves_no_transform_for_a_subscriber_that_comes_later(procs, run3,
+                                                                               tmp_path):
+    """A robot dropped (its SLAM restarted in a new frame, with too small a map to be placed
+    again) kept its last pose latched on its transform topic: a navigation stack started
+    later took that transform for a placement the node no longer held."""
+    g2 = fk.load_map(run3 / "robot_2.yaml")
+    rows, cols = g2.occupied_mask().nonzero()
+    r0, c0 = int(rows[rows.size // 2]) - 20, int(cols[rows.size // 2]) - 20
+    # a 4 x 4 m window of robot_2's map, turned 90 degrees: a restart in a new frame
+    corner = fk.OccupancyGrid(g2.data[r0:r0 + 40, c0:c0 + 40][::-1].T.copy(), g2.resolution,
+                              (0.0, 0.0, 0.0), "robot_2")
+    assert corner.occupied_mask().any()
+    fk.save_map(corner, tmp_path / "corner.yaml")
+    probe_out = tmp_path / "probe.jsonl"
+    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
+                          "robot_1", "robot_2"])
+    procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
+                                      "-p", "estimation_rate:=1.0"])
+    procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER,
+                        f"robot_1={run3 / 'robot_1.yaml'}@0", f"robot_2={run3 / 'robot_2.yaml'}@0",
+                        f"robot_2={tmp_path / 'corner.yaml'}@12"])
+
+    def robot_2_is(placed, updates):
+        def check():
+            sts = [s["status"] for s in _records(probe_out, "status")]
+            r2 = sts[-1]["robots"].get("/robot_2", {}) if sts else {}
+            return r2.get("updates") == updates and r2.get("placed") is placed and r2
+        return check
+
+    _wait(robot_2_is(True, 1), 90, procs, "robot_2 placed")
+    assert any(p["robot"] == "robot_2" for p in _records(probe_out, "pose"))
+    dropped = _wait(robot_2_is(False, 2), 90, procs, "robot_2 dropped after its restart")
+    assert dropped["last_decision"] == "dropped", dropped
+    late_out = tmp_path / "late.jsonl"
+    procs.start("late", [sys.executable, str(HERE / "_ros2_probe.py"), str(late_out),
+                         "robot_1", "robot_2"])
+    # the reference's pose comes to the late subscriber; robot_2's does not
+    _wait(lambda: any(p["robot"] == "robot_1" for p in _records(late_out, "pose")), 30, procs,
+          "the reference robot's transform at the late subscriber")
+    time.sleep(3.0)
+    assert [p for p in _records(late_out, "pose") if p["robot"] == "robot_2"] == []
+    assert procs.stop("late") == 0 and procs.stop("pub") == 0 and procs.stop("node") == 0
+    log = procs.log("node")
+    assert "/robot_2: dropped" in log and "Traceback" not in log and "ERROR" not in log

@@ -31,6 +31,8 @@ class Robot:
     judged: OccupancyGrid | None = None   # the map its held transform was last judged on
     sub: object = None
     pose_pub: object = None
+    pose_topic: str = ""
+    pose_sent: bool = False      # its transform topic holds a pose (latched)
 
 
 def estimate_round(snapshot: list, reference: str, settings: NodeSettings, tracker: Tracker,

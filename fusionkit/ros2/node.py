@@ -71,6 +71,7 @@ class MergeNode:
         self.log = node.get_logger()
         self._GridMsg, self._Pose, self._String = GridMsg, PoseStamped, String
         self._lock = threading.Lock()
+        self._pose_lock = threading.Lock()   # a robot's transform publisher, replaced when dropped
         self._stop = threading.Event()
         self._wake_compose = threading.Event()
         self.robots: dict[str, Robot] = {}
@@ -199,8 +200,8 @@ class MergeNode:
 
     def _add_robot(self, name: str, topic: str) -> None:
         r = Robot(name, topic)
-        r.pose_pub = self.node.create_publisher(self._Pose, f"~/{robot_slug(name)}/transform",
-                                                latched_qos())
+        r.pose_topic = f"~/{robot_slug(name)}/transform"
+        r.pose_pub = self.node.create_publisher(self._Pose, r.pose_topic, latched_qos())
         with self._lock:
             self.robots[name] = r
             if self.s.known_init_poses:
@@ -257,14 +258,27 @@ class MergeNode:
 
     # -- publishing (worker threads) ----------------------------------------------------------
     def _publish_pose(self, r: Robot) -> None:
+        with self._pose_lock:
+            self._publish_pose_locked(r)
+
+    def _publish_pose_locked(self, r: Robot) -> None:
         held = self.tracker.held(r.name)
-        if held is None or r.pose_pub is None:
+        if r.pose_pub is None:
+            return
+        if held is None:
+            if r.pose_sent:
+                # dropped: a latched pose cannot be taken back, but its publisher can; a
+                # subscriber that joins later gets no transform for a robot not placed
+                self.node.destroy_publisher(r.pose_pub)
+                r.pose_pub = self.node.create_publisher(self._Pose, r.pose_topic, latched_qos())
+                r.pose_sent = False
             return
         msg = self._Pose()
         msg.header.frame_id = self.s.world_frame
         msg.header.stamp = self._stamp()
         fill_pose(msg.pose, held[0])
         r.pose_pub.publish(msg)
+        r.pose_sent = True
         if self.tf is not None:
             from geometry_msgs.msg import TransformStamped
             t = TransformStamped()
