@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import signal
+import threading
 
 from .errors import InputError
 from ._executor_base import Executor, worker_setup
@@ -37,6 +39,30 @@ def _quiet_dask() -> None:
     its event loop log of the tasks and transfers cut short (errors, tracebacks) is not said."""
     for name in ("distributed", "asyncio", "tornado"):
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
+
+
+#: Signals a terminal sends to every process of its foreground group, which fusionkit turns into
+#: a clean stop (:mod:`fusionkit._signals`).
+_TERMINAL_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGHUP") if hasattr(signal, n))
+
+
+def _hold_terminal_signals():
+    """Block the terminal's signals in this thread (from the main thread only, where Python
+    runs its handlers); the mask before, for :func:`_release`, or None."""
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        return None
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, _TERMINAL_SIGNALS)
+    # Python's resource tracker (a process the workers' start needs) unblocks SIGINT in the
+    # thread that first starts it: started here, with the signals blocked, then blocked again
+    from multiprocessing import resource_tracker
+    resource_tracker.ensure_running()
+    signal.pthread_sigmask(signal.SIG_BLOCK, _TERMINAL_SIGNALS)
+    return held
+
+
+def _release(held) -> None:
+    if held is not None:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def _dask_call(fn, shared, task):
@@ -121,6 +147,14 @@ class DaskExecutor(Executor):
             # the cluster; the workers ignore it from their first import on (_dask_worker)
             from distributed.deploy.spec import SpecCluster
             before = set(SpecCluster._instances)
+            # the terminal's signals (Ctrl-C, a hang-up) are held back while the cluster
+            # starts: every thread it starts (Dask's event loop, which spawns the workers and
+            # Python's resource tracker) and every process those start inherit them blocked,
+            # so only this process stops the run and closes the cluster; a worker still loading
+            # Dask printed a traceback, and a hang-up killed the resource tracker, whose
+            # successor printed one per worker. A signal that came meanwhile arrives once
+            # the mask is restored, inside this try.
+            held = _hold_terminal_signals()
             try:
                 self._cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
                                              processes=True, host="127.0.0.1",
@@ -129,7 +163,10 @@ class DaskExecutor(Executor):
                                              preload=["fusionkit._dask_worker"],
                                              scheduler_kwargs={"dashboard": bool(dashboard)})
                 self._client = Client(self._cluster, set_as_default=False)
+                _release(held)
+                held = None
             except BaseException as exc:
+                _release(held)
                 if isinstance(exc, KeyboardInterrupt):
                     _quiet_dask()
                 self.close()

@@ -378,7 +378,8 @@ def test_a_signalled_command_exits_130_or_143_with_one_line_and_its_outputs_unch
     assert proc.returncode == code, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    assert lines[0].startswith("fusionkit simulate: " + ("interrupted" if how == "SIGINT" else "terminated"))
+    assert lines[0].startswith("fusionkit simulate: " + {"SIGINT": "interrupted", "SIGTERM": "terminated",
+                                                         "SIGHUP": "hung up"}[how])
     assert _files(earlier_run) == before
 
 

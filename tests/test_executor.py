@@ -100,6 +100,23 @@ def _same_merge(a, b):
            [(s.placed, s.new, s.confidence) for s in b.steps]
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_the_workers_of_a_local_cluster_never_take_the_terminals_signals(cluster):
+    """A Ctrl-C or a hang-up while the workers were still loading Dask printed their
+    tracebacks: they start with both signals blocked, and this process alone stops the run."""
+    import os
+
+    pids = cluster.client.run(os.getpid)
+    assert len(pids) == 2
+    for pid in pids.values():
+        blocked = next(int(line.split()[1], 16) for line in
+                       open(f"/proc/{pid}/status").read().splitlines() if line.startswith("SigBlk"))
+        for sig in (signal.SIGINT, signal.SIGHUP):
+            assert blocked & (1 << (sig - 1)), (pid, sig, hex(blocked))
+    # and this process takes them as before
+    assert not signal.pthread_sigmask(signal.SIG_BLOCK, []) & {signal.SIGINT, signal.SIGHUP}
+
+
 def test_merge_on_a_local_cluster_equals_the_in_process_merge(cluster):
     grids = _fleet()
     # one candidate per map: the candidate, widening and loop-closing rounds all run remotely
@@ -254,9 +271,14 @@ def _group_gone(pgid: int, seconds: float = 10.0) -> bool:
     return False
 
 
-def test_ctrl_c_at_the_terminal_stops_a_dask_run_with_one_line(tmp_path):
-    """Ctrl-C at a terminal reaches every process of its group, the cluster's workers too: the
-    run ends with its one line and exit 130, no worker's traceback or warning, no worker left."""
+@pytest.mark.parametrize("sig, code, said", [(signal.SIGINT, 130, "interrupted"),
+                                              (signal.SIGHUP, 129, "hung up")],
+                         ids=["Ctrl-C", "hang-up"])
+def test_a_terminal_signal_stops_a_dask_run_with_one_line(tmp_path, sig, code, said):
+    """Ctrl-C at a terminal, or its closing, reaches every process of its group, the cluster's
+    workers too: the run ends with its one line, no worker's traceback or warning, no worker
+    left. A hang-up killed Python's resource tracker, whose successor printed a traceback per
+    worker."""
     import os
     import subprocess
     import sys
@@ -270,15 +292,15 @@ def test_ctrl_c_at_the_terminal_stops_a_dask_run_with_one_line(tmp_path):
         first = proc.stderr.readline()  # "dask: 2 workers at ...": the cluster is up
         assert first.startswith("dask:"), first
         time.sleep(4)  # cases running on the workers
-        os.killpg(proc.pid, signal.SIGINT)
+        os.killpg(proc.pid, sig)
         rest = proc.stderr.read()
-        assert proc.wait(timeout=60) == 130
+        assert proc.wait(timeout=60) == code, rest
         left = not _group_gone(proc.pid)   # the workers go with the cluster, closed on the way out
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.killpg(proc.pid, signal.SIGKILL)
         proc.wait(timeout=30)
-    assert rest.strip().splitlines() == ["fusionkit bench: interrupted; no output was left half-written"], rest
+    assert rest.strip().splitlines() == [f"fusionkit bench: {said}; no output was left half-written"], rest
     assert not left, "a process of the run outlived it by 10 s"
 
 

@@ -197,16 +197,15 @@ def _interrupted(command: str, argv, exc: KeyboardInterrupt) -> int:
         # the ROS 2 commands run until stopped and write nothing: stopped while they start
         # up, they end as they do once running, with exit 0
         return 0
-    term = isinstance(exc, _signals.Terminated)
+    how = ("hung up" if isinstance(exc, _signals.HungUp) else
+           "terminated" if isinstance(exc, _signals.Terminated) else "interrupted")
     atomic = sys.modules.get("fusionkit._atomic")
     written = list(atomic.COMMITTED) if atomic is not None else []
     if written:   # the signal came after a set of outputs was committed: that one is new
-        _say(f"{command}: {'terminated' if term else 'interrupted'} after writing "
-             f"{_one_line(written[-1])} (its set of outputs is whole and new); nothing "
-             f"was left half-written")
+        _say(f"{command}: {how} after writing {_one_line(written[-1])} (its set of outputs is "
+             f"whole and new); nothing was left half-written")
     else:
-        _say(f"{command}: {'terminated' if term else 'interrupted'}; no output was left "
-             f"half-written")
+        _say(f"{command}: {how}; no output was left half-written")
     return _signals.exit_status(exc)
 
 
