@@ -194,17 +194,19 @@ class MergeResult:
     fused : FusedMap
         The fused map with each cell's contributing map (``owner``) and the cumulative steps.
     unique : tuple of UniquePoses or None
-        Algorithm 1's result per map (None for a map the paper's method could not scan: no
-        free cell and no recorded scans).
+        The paper's method: Algorithm 1's result per map (None for a map it could not scan: no
+        free cell and no recorded scans). Empty for the other methods.
     plan : FusionPlan
         Agreement counts and the planned order.
     agreements : dict
-        ``(a, b) -> PairAgreement`` for every pair ``a < b``.
+        The paper's method: ``(a, b) -> PairAgreement`` for every pair ``a < b``. Empty for the
+        other methods.
     steps : tuple of MergeStep
         Every alignment tried, accepted or not, with its PSO history.
     scans : tuple of ScanLog or None
-        The scans used (virtual ones for maps that had none; None for a map the paper's method
-        left out unscanned).
+        The scans used per map: recorded ones, or virtual ones where the method cast them for
+        a map that had none (the paper's method does; ``consensus`` does only with
+        ``ConsensusConfig.virtual_scans``); None for a map without scans.
     virtual : tuple of bool
         Which maps got virtual scans.
     seconds : dict
@@ -367,7 +369,8 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     maps : sequence of OccupancyGrid or paths to map YAML files
         At least two maps. Paths load their ``.scans.npz`` too when one stands beside.
     scans : sequence of ScanLog or None, optional
-        Scans per map (None where a map has none: virtual scans are cast in its free space).
+        Scans per map (None where a map has none: the consensus method then places it by its
+        walls alone, the paper's method casts virtual scans in its free space).
     config : MergeConfig
     callback : callable(MergeEvent) -> bool, optional
         Called as the merge progresses (each PSO iteration included); returning True cancels

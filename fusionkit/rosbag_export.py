@@ -173,7 +173,8 @@ def _run_robots(run_dir: Path):
     from .mapio import load_map
 
     if not run_dir.is_dir():
-        raise InputError(f"{run_dir}: run directory not found")
+        raise InputError(f"{run_dir}: is a file, not a run directory (fusionkit simulate --out DIR)"
+                         if run_dir.exists() else f"{run_dir}: run directory not found")
     npzs = sorted(run_dir.glob("*.scans.npz"), key=_natural_key)
     if not npzs:
         raise InputError(f"{run_dir}: no NAME.scans.npz scan logs in this directory; export "

@@ -182,6 +182,22 @@ def test_an_error_is_named_by_the_command_that_met_it_as_its_usage_errors_are(tm
     assert err.startswith(f"{command}: error: ") and err.count("\n") == 1, err
 
 
+@pytest.mark.parametrize("argv, said", [
+    (["bench", "notes.txt", "--cases", "1", "--out", "out"],
+     "fusionkit bench: error: notes.txt: is a file, not a folder of ground-truth maps"),
+    (["export", "rosbag", "notes.txt"],
+     "fusionkit export rosbag: error: notes.txt: is a file, not a run directory"),
+])
+def test_a_file_given_for_a_folder_is_said_to_be_a_file(tmp_path, capsys, monkeypatch, argv, said):
+    """It was said not to exist ("no such folder", "not found")."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "notes.txt").write_text("not a folder\n")
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(said) and err.count("\n") == 1, err
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_map_given_twice_is_refused_in_one_line(tmp_path, capsys):
     """The same file under one path or two (``a/../a``, a link) is one map: merged with itself it
     would be placed on itself and listed twice in the report."""

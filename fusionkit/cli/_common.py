@@ -110,7 +110,8 @@ def add_merge_options(p, method: str | None = None, *, seed_flag: str = "--seed"
     g.add_argument("--particles", type=int_range(1, 10000), default=d.pso.particles,
                    help=f"PSO swarm size (default {d.pso.particles})")
     g.add_argument("--iterations", type=int_range(0, 100000), default=d.pso.iterations,
-                   help=f"PSO iterations (default {d.pso.iterations})")
+                   help=f"PSO iterations (default {d.pso.iterations}; 0: the best particle of "
+                        f"the starting swarm, not moved)")
     g.add_argument("--w", type=float_range(0, 10), default=d.pso.w, help=f"PSO inertia weight (default {d.pso.w})")
     g.add_argument("--c1", type=float_range(0, 10), default=d.pso.c1,
                    help=f"PSO cognitive coefficient (default {d.pso.c1})")

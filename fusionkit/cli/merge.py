@@ -24,7 +24,8 @@ def register(sub) -> None:
         "merge", help="fuse several robots' maps into the first map's frame",
         description="Find the rigid transform of each map into the reference map's frame and fuse "
                     "them (ROS map_server YAML in, YAML + PGM out). A NAME.scans.npz beside a map is "
-                    "used when present; otherwise virtual scans are cast in the map's free space. "
+                    "used when present; without, the default method places the map by its walls alone "
+                    "and spectral-pso casts virtual scans in the map's free space. "
                     "Exit status: 0 all maps merged, 3 some left out (not confidently placed), "
                     "2 bad input. Maps linked among themselves but not to the reference are "
                     "fused group by group into MERGED.group1.yaml, ... (listed in the report). "
