@@ -3,6 +3,7 @@ interface, or the cluster of a scheduler given by its address (the optional ``[d
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import logging
 import signal
@@ -245,7 +246,24 @@ class DaskExecutor(Executor):
     def __exit__(self, kind, *exc):
         if kind is not None and issubclass(kind, KeyboardInterrupt):
             _quiet_dask()
+            self._stop_workers()
         self.close()
+
+    def _stop_workers(self, wait: float = 0.5) -> None:
+        """Stop the workers of the cluster this executor started, each given ``wait`` s to end
+        its task before it is killed (a close gives them 4 s: a Ctrl-C waited for them). What
+        they compute is thrown away; they write nothing."""
+        cluster = self._cluster
+        if cluster is None:
+            return
+        nannies = list(getattr(cluster, "workers", {}).values())
+
+        async def stop():
+            await asyncio.gather(*(n.close(timeout=wait / 0.8) for n in nannies
+                                   if hasattr(n, "close")), return_exceptions=True)
+
+        with contextlib.suppress(Exception):
+            cluster.sync(stop)
 
     def close(self) -> None:
         # a worker slow to exit is killed by its nanny: expected here, not worth a warning
