@@ -410,11 +410,35 @@ async def test_the_consensus_method_runs_from_the_settings(in_root):
         assert result is not None and result.config.method == "consensus"
         assert result.all_merged
         assert "no swarm" in screen.run_panel.plot.note
+        # said in words, not over an empty chart that fills the tab
+        assert not screen.run_panel.plot.display
+        assert "no swarm" in str(screen.run_panel.query_one("#no-swarm").render())
         # its own stages, not the paper's method's (it showed "✓ unique poses  ✓ pairing")
         stages = str(screen.run_panel.query_one("#stages").render())
         assert "place pairs" in stages and "unique poses" not in stages, stages
         assert screen.run_panel.plot.series == []              # no swarm, no legend of pairs
         assert screen.query_one("#placements", DataTable).row_count == ROBOTS
+
+
+async def test_the_method_and_seeding_help_is_given_in_full_when_focused(in_root):
+    """Their one-line hints are cut at the terminal's width; the method's help was given in
+    full nowhere."""
+    from textual.widgets import Select
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        await pilot.press("2")
+        screen.query_one("#method", Select).focus()
+        await pilot.pause()
+        note = str(screen.query_one("#settings-note").render())
+        assert "method: default spectral-pso: the paper's DFT" in note and "tab moves into the fields" in note
+        screen.query_one("#method", Select).value = "consensus"
+        await pilot.pause()
+        assert "method: consensus: the library's default" in str(screen.query_one("#settings-note").render())
+        screen.query_one("#seeding").focus()
+        await pilot.pause()
+        assert "seeding: default on: " in str(screen.query_one("#settings-note").render())
 
 
 async def test_invalid_settings_block_the_run_with_a_message(in_root):

@@ -64,6 +64,11 @@ class RunPanel(Vertical):
         height: auto;
         max-height: 2;
     }
+    RunPanel #no-swarm {
+        height: auto;
+        margin-top: 1;
+        color: $text-muted;
+    }
     RunPanel #detail, RunPanel #left {
         height: 1;
         color: $text-muted;
@@ -89,6 +94,8 @@ class RunPanel(Vertical):
         yield Static("", id="left")
         yield Static("", id="legend")
         yield ConvergencePlot(id="plot")
+        # said instead of an empty plot when the method has no swarm
+        yield Static("", id="no-swarm")
 
     def on_mount(self) -> None:
         self.idle()
@@ -181,8 +188,13 @@ class RunPanel(Vertical):
         self._iterations = iterations
         self._stage, self._step, self._where = "", -1, (0, 0)
         self._stage_list = stages_of(method)
-        self.plot.reset("" if method == "spectral-pso" else
+        swarm = method == "spectral-pso"
+        self.plot.reset("" if swarm else
                         f"{method}: no swarm to watch (the paper's method, spectral-pso, has one)")
+        self.plot.display = swarm
+        note = self.query_one("#no-swarm", Static)
+        note.update(self.plot.note)
+        note.display = not swarm
         self._legend()
         self.query_one(ProgressBar).update(progress=0)
         self.query_one("#stages", Static).update(self._stages(self._stage_list[0][0]))

@@ -160,8 +160,11 @@ def _default_text(s: Setting) -> str:
     return "" if s.default is None else f"{s.default:g}" if isinstance(s.default, float) else str(s.default)
 
 
-_NOTE = ("tab moves into the fields (or click one); escape or enter leaves a field; an invalid "
-         "value turns red and blocks the run; 1-4 switch tabs, r runs (ctrl+r while typing).")
+_SEEDING = ("default on: spectral-pso starts the swarm also at the transforms of matched scans; "
+            "off: the paper's blind search")
+_NOTE = ("tab moves into the fields (or click one) and shows the field's help in full here; escape "
+         "or enter leaves a field; an invalid value turns red and blocks the run; 1-4 switch "
+         "tabs, r runs (ctrl+r while typing).")
 
 
 class SettingsForm(VerticalScroll, can_focus=True):
@@ -241,9 +244,7 @@ class SettingsForm(VerticalScroll, can_focus=True):
                 yield Static(f"default {default}: {s.help}", id=f"hint-{s.key}", classes="hint")
             yield Label("seeding", id="label-seeding")
             yield Checkbox("on", MergeConfig().alignment.seeded, id="seeding", compact=True)
-            yield Static("default on: spectral-pso starts the swarm also at the transforms of "
-                         "matched scans; off: the paper's blind search", id="hint-seeding",
-                         classes="hint")
+            yield Static(_SEEDING, id="hint-seeding", classes="hint")
         yield Static(_NOTE, id="settings-note")
 
     @on(Checkbox.Changed, "#seeding")
@@ -256,6 +257,8 @@ class SettingsForm(VerticalScroll, can_focus=True):
         """The method's own words, and the settings it does not read dimmed."""
         method = str(event.value)
         self.query_one("#hint-method", Static).update(method_hint(method))
+        if event.select.has_focus:
+            self._describe(event.select)
         used = used_settings(method)
         for key in [s.key for s in SETTINGS] + ["seeding"]:
             field = "#seeding" if key == "seeding" else f"#set-{key}"
@@ -324,6 +327,12 @@ class SettingsForm(VerticalScroll, can_focus=True):
                 text.append(_NOTE)
                 note.update(text)
                 return
+        if widget.id == "method":
+            note.update(Text(f"method: {method_hint(str(widget.value))}\n").append(_NOTE))
+            return
+        if widget.id == "seeding":
+            note.update(Text(f"seeding: {_SEEDING}\n").append(_NOTE))
+            return
         note.update(_NOTE)
 
     def _hint(self, s: Setting, failure: str | None) -> None:
