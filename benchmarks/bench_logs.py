@@ -77,7 +77,7 @@ def main(argv=None) -> int:
                                         "confidence": round(p.confidence, 4), "group": p.group,
                                         "reason": p.reason, "seconds_per_pair": sec / (k - 1)})
                     print(f"{log.name} K={k} {method:15} "
-                          + " ".join(r["outcome"][0] for r in records[-(k - 1):]), flush=True)
+                          + " ".join(r["outcome"] for r in records[-(k - 1):]), flush=True)
     print()
     print("| method | pairs | right | wrong | refused | median s/pair |")
     print("|---|---|---|---|---|---|")
