@@ -266,17 +266,22 @@ class DaskExecutor(Executor):
             cluster.sync(stop)
 
     def close(self) -> None:
+        from ._signals import deferred
+
         # a worker slow to exit is killed by its nanny: expected here, not worth a warning
         log = logging.getLogger("distributed")
         level = log.level
         log.setLevel(logging.ERROR)
+        # a Ctrl-C during the close takes effect after it: cut short, the close left the
+        # cluster to Dask's exit hook, which closed it seconds later
         try:
-            self._drop_shared()
-            if self._client is not None:
-                self._client.close()
-                self._client = None
-            if self._cluster is not None:
-                self._cluster.close()
-                self._cluster = None
+            with deferred():
+                self._drop_shared()
+                if self._client is not None:
+                    self._client.close()
+                    self._client = None
+                if self._cluster is not None:
+                    self._cluster.close()
+                    self._cluster = None
         finally:
             log.setLevel(level)

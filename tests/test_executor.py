@@ -117,6 +117,36 @@ def test_the_workers_of_a_local_cluster_never_take_the_terminals_signals(cluster
     assert not signal.pthread_sigmask(signal.SIG_BLOCK, []) & {signal.SIGINT, signal.SIGHUP}
 
 
+def test_a_ctrl_c_while_the_cluster_closes_takes_effect_once_it_is_closed():
+    """Cut short, the close left the cluster to Dask's exit hook, which closed it seconds
+    after the command's last line."""
+    import os
+
+    from fusionkit import _signals
+
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+    _signals.install()
+    try:
+        with deadline(120):
+            ex = DaskExecutor(2, dashboard=False)
+        cluster, client = ex._cluster, ex._client
+        real, sent = client.close, []
+
+        def close_interrupted(*a, **k):
+            if not sent:
+                sent.append(os.kill(os.getpid(), signal.SIGINT))   # Ctrl-C in the middle of the close
+            return real(*a, **k)
+
+        client.close = close_interrupted
+        with deadline(60), pytest.raises(KeyboardInterrupt):
+            ex.close()
+        assert ex._cluster is None and ex._client is None
+        assert cluster.status.name == "closed", cluster.status
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+
+
 def test_merge_on_a_local_cluster_equals_the_in_process_merge(cluster):
     grids = _fleet()
     # one candidate per map: the candidate, widening and loop-closing rounds all run remotely
