@@ -484,6 +484,57 @@ async def test_a_broken_map_is_a_notification_not_a_crash(tmp_path, monkeypatch)
         assert not isinstance(app.screen, HelpScreen)
 
 
+async def test_a_map_has_one_name_on_every_tab_beside_an_unreadable_namesake(in_root):
+    """With an unreadable other/robot_2.yaml chosen too, the Maps tab said run/robot_2 and the
+    Result tab robot_2: the names were made over the readable maps only."""
+    from fusionkit_tui.runner import map_labels
+
+    other = in_root / "other"
+    other.mkdir(exist_ok=True)
+    (other / "robot_2.yaml").write_text("image: missing.pgm\nresolution: 0.05\n")
+    try:
+        app = make_app(["run/robot_1.yaml", "run/robot_2.yaml", "other/robot_2.yaml"])
+        async with app.run_test(size=(100, 32)) as pilot:
+            await ready(pilot)
+            screen = app.main
+            shown = map_labels(screen.maps.selected)
+            assert shown[:2] == ["robot_1", "run/robot_2"], shown
+            await run_merge(pilot)
+            assert screen.result is not None
+            assert screen.labels == ["robot_1", "run/robot_2"], screen.labels
+            table = screen.query_one("#placements", DataTable)
+            assert str(table.get_row_at(1)[0]) == "run/robot_2"
+            # the unreadable map is said once, not again at every run
+            await run_merge(pilot)
+            said = [n for n in app._notifications if "unreadable map" in (n.title or "")]
+            assert len(said) == 1, [n.title for n in app._notifications]
+    finally:
+        (other / "robot_2.yaml").unlink()
+        other.rmdir()
+
+
+async def test_a_highlighted_folder_is_not_shown_beside_the_last_maps_preview(in_root):
+    """Its row in the tree kept the preview of the map highlighted before (or its "cannot read
+    this map"), as if it were that map's."""
+    app = make_app(["."])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        maps = app.main.maps
+        preview = maps.query_one("#preview")
+        tree = app.main.query_one(MapTree)
+        tree.focus()
+        folder = next(n for n in tree.root.children if n.data is not None and n.data.path.name == "run")
+        tree.cursor_line = folder.line
+        await pilot.press("enter")            # opens it
+        await until(pilot, lambda: any(n.data.path.name == "robot_1.yaml" for n in folder.children))
+        tree.cursor_line = next(n.line for n in folder.children if n.data.path.name == "robot_1.yaml")
+        await until(pilot, lambda: preview.grid is not None)
+        tree.cursor_line = folder.line
+        await until(pilot, lambda: preview.grid is None)
+        assert "folder" in preview._message
+        assert "run/: a folder" in str(maps.query_one("#info").render())
+
+
 # -- snapshots ------------------------------------------------------------------------------------
 def _snapshot_ready(tab: str | None = None, merge: bool = False, then: str | None = None):
     async def before(pilot):

@@ -78,6 +78,7 @@ class MainScreen(Screen):
         self.exported: ExportPaths | None = None
         #: The names the result shows for its inputs (shortest unique ends of their paths).
         self.labels: list[str] = []
+        self._said_unreadable: set = set()   # the unreadable maps the last warning named
         #: When the last run did not end well: why ("cancelled", "failed"), so that the result
         #: still held is known to be an earlier one.
         self.last_run_outcome: str | None = None
@@ -221,7 +222,8 @@ class MainScreen(Screen):
             return
         maps = self.maps.usable()
         bad = self.maps.unreadable
-        if bad:
+        if bad and set(bad) != self._said_unreadable:   # said once for the same maps, not at every r
+            self._said_unreadable = set(bad)
             self.notify("; ".join(f"{why}" for why in list(bad.values())[:2])
                         + ("; ..." if len(bad) > 2 else ""),
                         title=f"{len(bad)} unreadable map{'s' if len(bad) > 1 else ''} left out",
@@ -244,7 +246,10 @@ class MainScreen(Screen):
                                            f"{self.result_time}", running=True)
         self.run_panel.begin(len(maps), config.pso.iterations, config.method)
         self.action_show_tab("run")
-        self._merge(list(maps), config, map_labels(maps))
+        # named as the Maps tab names them: among every chosen map, the unreadable ones too
+        every = self.maps.selected
+        named = dict(zip(every, map_labels(every)))
+        self._merge(list(maps), config, [named.get(p, n) for p, n in zip(maps, map_labels(maps))])
 
     @work(thread=True, exclusive=True, group="merge", exit_on_error=False)
     def _merge(self, inputs: list[Path], config: MergeConfig, labels: list[str]) -> None:

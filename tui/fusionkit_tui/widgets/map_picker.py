@@ -292,6 +292,11 @@ class MapsPane(Vertical):
         entry = event.node.data
         if entry is not None and is_map_file(entry.path):
             self._preview(entry.path)
+        elif entry is not None and event.node is not event.node.tree.root and entry.path.is_dir():
+            # not the last map's preview (or its "cannot read") beside a highlighted folder
+            self._previewing = None
+            self.query_one("#info", Static).update(f"{entry.path.name or entry.path}/: a folder")
+            self.query_one(MapPreview).clear("a folder: enter expands it, a adds its maps")
 
     @on(DataTable.RowHighlighted)
     def _on_row_highlight(self, event: DataTable.RowHighlighted) -> None:
