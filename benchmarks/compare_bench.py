@@ -13,6 +13,7 @@ and the ratio of the two runs' wall times. Exit status 0 when identical, 1 other
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -50,11 +51,11 @@ def differences(a, b, path="") -> list[str]:
 
 
 def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if len(argv) != 2:
-        print("usage: compare_bench.py A/bench.json B/bench.json", file=sys.stderr)
-        return 2
-    a, b = (json.load(open(p)) for p in argv)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("first", metavar="A/bench.json")
+    ap.add_argument("second", metavar="B/bench.json")
+    args = ap.parse_args(argv)
+    a, b = (json.load(open(p)) for p in (args.first, args.second))
     sa, sb = strip(a), strip(b)
     diffs = differences(sa, sb)
     print(f"cases: {len(a['cases'])} vs {len(b['cases'])}; identical (timings aside): "
