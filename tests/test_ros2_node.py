@@ -183,6 +183,12 @@ def _records(path: Path, kind: str) -> list:
     return out
 
 
+def _probe(procs, out: Path, *robots: str, name: str = "probe"):
+    """Start a listener writing the merged map, the status and the robots' transforms to
+    ``out`` (JSON lines)."""
+    return procs.start(name, [sys.executable, str(HERE / "_ros2_probe.py"), str(out), *robots])
+
+
 def _wait(condition, timeout, procs, what):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -201,8 +207,7 @@ def _wait(condition, timeout, procs, what):
 def test_node_merges_a_played_run_holds_transforms_and_survives_bad_input(procs, run3, tmp_path):
     steps = 6
     probe_out = tmp_path / "probe.jsonl"
-    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
-                          "robot_1", "robot_2", "robot_3", "robot_bad"])
+    _probe(procs, probe_out, "robot_1", "robot_2", "robot_3", "robot_bad")
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
                                       "-p", "estimation_rate:=1.0"])
     procs.start("bad", [sys.executable, "-c", BAD_PUBLISHER])
@@ -294,8 +299,7 @@ def test_an_empty_first_map_is_not_the_reference_and_a_pending_switch_is_decided
     changing were never estimated again; then it kept the wrong one until a second estimation
     confirmed the better one, though the wrong one no longer fitted robot_3's map at all."""
     probe_out = tmp_path / "probe.jsonl"
-    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
-                          "robot_1", "robot_2", "robot_3"])
+    _probe(procs, probe_out, "robot_1", "robot_2", "robot_3")
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
                                       "-p", "estimation_rate:=1.0"])
     procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER, f"robot_1={first}@0",
@@ -349,8 +353,7 @@ def test_known_init_poses_from_a_map_merge_params_file(procs, run3, tmp_path):
             /robot_3/map_merge/init_pose_x: 2.0
         """))
     probe_out = tmp_path / "probe.jsonl"
-    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
-                          "robot_1", "robot_2", "robot_3"])
+    _probe(procs, probe_out, "robot_1", "robot_2", "robot_3")
     procs.start("node", FUSIONKIT + ["ros2", "merge-node", "--params-file", str(params)])
     procs.start("play", FUSIONKIT + ["ros2", "play", str(run3), "--duration", "0", "--steps", "1"])
     _wait(lambda: {p["robot"] for p in _records(probe_out, "pose")} >= {"robot_1", "robot_2"}
@@ -434,8 +437,7 @@ def test_the_status_is_published_while_the_reference_robot_is_missing(procs, run
     """With ``reference_robot`` naming a robot that never comes, nothing can be placed; the
     status still says which robots are there and that none is placed."""
     probe_out = tmp_path / "probe.jsonl"
-    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
-                          "robot_1", "robot_2", "robot_3"])
+    _probe(procs, probe_out, "robot_1", "robot_2", "robot_3")
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
                                       "-p", "reference_robot:=/nobody"])
     procs.start("play", FUSIONKIT + ["ros2", "play", str(run3), "--duration", "10", "--steps", "2"])
@@ -478,8 +480,7 @@ def test_a_reference_robot_whose_map_has_not_come_is_not_said_placed(procs, run3
     """The status said the reference robot was placed (confidence 1) while no map of it had
     arrived, so nothing of it was in the merged map."""
     probe_out = tmp_path / "probe.jsonl"
-    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
-                          "robot_1", "robot_2"])
+    _probe(procs, probe_out, "robot_1", "robot_2")
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
                                       "-p", "reference_robot:=/robot_1"])
     procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER, "robot_1=none@0",
@@ -502,8 +503,7 @@ def test_a_map_that_changes_nothing_merged_does_not_send_the_merged_map_again(pr
     """Every map message of a robot not yet placed sent the same merged map again (at start-up,
     twice): a subscriber such as a navigation stack redoes its work for nothing."""
     probe_out = tmp_path / "probe.jsonl"
-    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
-                          "robot_1", "robot_2"])
+    _probe(procs, probe_out, "robot_1", "robot_2")
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
                                       "-p", "estimation_rate:=2.0"])
     procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER,
@@ -536,8 +536,7 @@ def test_a_dropped_robot_leaves_no_transform_for_a_subscriber_that_comes_later(p
     assert corner.occupied_mask().any()
     fk.save_map(corner, tmp_path / "corner.yaml")
     probe_out = tmp_path / "probe.jsonl"
-    procs.start("probe", [sys.executable, str(HERE / "_ros2_probe.py"), str(probe_out),
-                          "robot_1", "robot_2"])
+    _probe(procs, probe_out, "robot_1", "robot_2")
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
                                       "-p", "estimation_rate:=1.0"])
     procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER,
@@ -556,8 +555,7 @@ def test_a_dropped_robot_leaves_no_transform_for_a_subscriber_that_comes_later(p
     dropped = _wait(robot_2_is(False, 2), 90, procs, "robot_2 dropped after its restart")
     assert dropped["last_decision"] == "dropped", dropped
     late_out = tmp_path / "late.jsonl"
-    procs.start("late", [sys.executable, str(HERE / "_ros2_probe.py"), str(late_out),
-                         "robot_1", "robot_2"])
+    _probe(procs, late_out, "robot_1", "robot_2", name="late")
     # the reference's pose comes to the late subscriber; robot_2's does not
     _wait(lambda: any(p["robot"] == "robot_1" for p in _records(late_out, "pose")), 30, procs,
           "the reference robot's transform at the late subscriber")
