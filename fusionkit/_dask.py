@@ -53,11 +53,16 @@ def _hold_terminal_signals():
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
         return None
     held = signal.pthread_sigmask(signal.SIG_BLOCK, _TERMINAL_SIGNALS)
-    # Python's resource tracker (a process the workers' start needs) unblocks SIGINT in the
-    # thread that first starts it: started here, with the signals blocked, then blocked again
-    from multiprocessing import resource_tracker
-    resource_tracker.ensure_running()
-    signal.pthread_sigmask(signal.SIG_BLOCK, _TERMINAL_SIGNALS)
+    try:
+        # Python's resource tracker (a process the workers' start needs) unblocks SIGINT in
+        # the thread that first starts it: started here, with the signals blocked, then
+        # blocked again
+        from multiprocessing import resource_tracker
+        resource_tracker.ensure_running()
+        signal.pthread_sigmask(signal.SIG_BLOCK, _TERMINAL_SIGNALS)
+    except BaseException:
+        _release(held)
+        raise
     return held
 
 
@@ -167,7 +172,6 @@ class DaskExecutor(Executor):
                 _release(held)
                 held = None
             except BaseException as exc:
-                _release(held)
                 if isinstance(exc, KeyboardInterrupt):
                     _quiet_dask()
                 self.close()
@@ -177,6 +181,7 @@ class DaskExecutor(Executor):
                     with contextlib.suppress(Exception):
                         cluster.close(timeout=10)
                     cluster.shutdown_on_close = False
+                _release(held)   # last: a signal held back arrives once all is closed
                 raise
             self._dashboard = bool(dashboard)
 
