@@ -222,8 +222,8 @@ class MainScreen(Screen):
             return
         maps = self.maps.usable()
         bad = self.maps.unreadable
-        if bad and set(bad) != self._said_unreadable:   # said once for the same maps, not at every r
-            self._said_unreadable = set(bad)
+        said, self._said_unreadable = self._said_unreadable, set(bad)
+        if bad and set(bad) != said:   # said once for the same maps, not at every r
             self.notify("; ".join(f"{why}" for why in list(bad.values())[:2])
                         + ("; ..." if len(bad) > 2 else ""),
                         title=f"{len(bad)} unreadable map{'s' if len(bad) > 1 else ''} left out",
