@@ -173,8 +173,10 @@ def _run_robots(run_dir: Path):
     from .mapio import load_map
 
     if not run_dir.is_dir():
-        raise InputError(f"{run_dir}: is a file, not a run directory (fusionkit simulate --out DIR)"
-                         if run_dir.exists() else f"{run_dir}: run directory not found")
+        what = "is a file, not a run directory" if run_dir.is_file() else \
+            "is not a folder; give a run directory"
+        raise InputError(f"{run_dir}: {what} (fusionkit simulate --out DIR)" if run_dir.exists()
+                         else f"{run_dir}: run directory not found")
     npzs = sorted(run_dir.glob("*.scans.npz"), key=_natural_key)
     if not npzs:
         raise InputError(f"{run_dir}: no NAME.scans.npz scan logs in this directory; export "

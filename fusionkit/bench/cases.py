@@ -90,7 +90,8 @@ def find_worlds(folders: Sequence[str | os.PathLike] = (), builtin: Sequence[str
     for folder in folders:
         d = Path(folder)
         if not d.is_dir():
-            raise InputError(f"{d}: is a file, not a folder of ground-truth maps" if d.exists()
+            raise InputError(f"{d}: is a file, not a folder of ground-truth maps" if d.is_file() else
+                             f"{d}: is not a folder; give a folder of ground-truth maps" if d.exists()
                              else f"{d}: no such folder of ground-truth maps")
         for p in sorted(d.glob("*.yaml")):
             name = p.stem
