@@ -433,6 +433,11 @@ async def test_the_method_and_seeding_help_is_given_in_full_when_focused(in_root
         await pilot.pause()
         note = str(screen.query_one("#settings-note").render())
         assert "method: default spectral-pso: the paper's DFT" in note and "tab moves into the fields" in note
+        await pilot.press("enter")            # its list open: still the method's help
+        await pilot.pause()
+        assert "method: default spectral-pso" in str(screen.query_one("#settings-note").render())
+        await pilot.press("escape")
+        await pilot.pause()
         screen.query_one("#method", Select).value = "consensus"
         await pilot.pause()
         assert "method: consensus: the library's default" in str(screen.query_one("#settings-note").render())

@@ -327,8 +327,9 @@ class SettingsForm(VerticalScroll, can_focus=True):
                 text.append(_NOTE)
                 note.update(text)
                 return
-        if widget.id == "method":
-            note.update(Text(f"method: {method_hint(str(widget.value))}\n").append(_NOTE))
+        select = next((w for w in widget.ancestors_with_self if isinstance(w, Select)), None)
+        if select is not None and select.id == "method":   # the field or its open list
+            note.update(Text(f"method: {method_hint(str(select.value))}\n").append(_NOTE))
             return
         if widget.id == "seeding":
             note.update(Text(f"seeding: {_SEEDING}\n").append(_NOTE))
