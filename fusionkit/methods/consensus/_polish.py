@@ -54,10 +54,6 @@ def _polish_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, mi
             c = math.cos(th)
             s = math.sin(th)
             m = 0
-            sx = 0.0
-            sy = 0.0
-            dx = 0.0
-            dy = 0.0
             for k in range(n):
                 x = c * pts[k, 0] - s * pts[k, 1] + tx
                 y = s * pts[k, 0] + c * pts[k, 1] + ty
@@ -86,16 +82,11 @@ def _polish_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, mi
                     src[m, 1] = pts[k, 1]
                     dst[m, 0] = qx
                     dst[m, 1] = qy
-                    sx += pts[k, 0]
-                    sy += pts[k, 1]
-                    dx += qx
-                    dy += qy
                     m += 1
             pairs = m
             if m < min_pairs:
                 return tx, ty, th, m
-            tx, ty, th, moved, turned = _fit_pairs(src, dst, m, sx / m, sy / m, dx / m, dy / m,
-                                                   tx, ty, th)
+            tx, ty, th, moved, turned = _fit_pairs(src, dst, m, tx, ty, th)
             if moved < 0.01 and turned < 1e-5:
                 break
     return tx, ty, th, pairs

@@ -74,46 +74,48 @@ def _icp_kernel(pts, tx, ty, th, gated, near_r, near_c, gates, iterations, min_p
         for _ in range(iterations):
             c = math.cos(th)
             s = math.sin(th)
-            sx = 0.0
-            sy = 0.0
-            dx = 0.0
-            dy = 0.0
             m = 0
             # B's points in A's cells
             for k in range(n):
                 cc[k] = math.floor(c * p0[k] - s * p1[k] + tx)
                 rr[k] = math.floor(s * p0[k] + c * p1[k] + ty)
-            # the pairs and their centroids
+            # the pairs
             for k in range(n):
                 ci = cc[k]
                 ri = rr[k]
                 if 0 <= ri < rows and 0 <= ci < cols and gated[ri, ci] <= gate:
-                    qx = near_c[ri, ci] + 0.5
-                    qy = near_r[ri, ci] + 0.5
                     src[m, 0] = p0[k]
                     src[m, 1] = p1[k]
-                    dst[m, 0] = qx
-                    dst[m, 1] = qy
-                    sx += p0[k]
-                    sy += p1[k]
-                    dx += qx
-                    dy += qy
+                    dst[m, 0] = near_c[ri, ci] + 0.5
+                    dst[m, 1] = near_r[ri, ci] + 0.5
                     m += 1
             pairs = m
             if m < min_pairs:
                 return tx, ty, th, m
-            tx, ty, th, moved, turned = _fit_pairs(src, dst, m, sx / m, sy / m, dx / m, dy / m,
-                                                   tx, ty, th)
+            tx, ty, th, moved, turned = _fit_pairs(src, dst, m, tx, ty, th)
             if moved < settle and turned < 1e-4:
                 break
     return tx, ty, th, pairs
 
 
 @njit
-def _fit_pairs(src, dst, m, sx, sy, dx, dy, tx, ty, th):
+def _fit_pairs(src, dst, m, tx, ty, th):
     """The rigid motion ``(tx, ty, theta)`` fitting ``src[:m]`` to ``dst[:m]`` (as
-    :func:`rigid_fit`), ``(sx, sy)`` and ``(dx, dy)`` their centroids, and how far it moved and
-    turned from the last one ``(tx, ty, th)``: ``(tx, ty, theta, moved, turned)``."""
+    :func:`rigid_fit`), and how far it moved and turned from the last one ``(tx, ty, th)``:
+    ``(tx, ty, theta, moved, turned)``."""
+    sx = 0.0
+    sy = 0.0
+    dx = 0.0
+    dy = 0.0
+    for k in range(m):
+        sx += src[k, 0]
+        sy += src[k, 1]
+        dx += dst[k, 0]
+        dy += dst[k, 1]
+    sx /= m
+    sy /= m
+    dx /= m
+    dy /= m
     num = 0.0
     den = 0.0
     for k in range(m):
