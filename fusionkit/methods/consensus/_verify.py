@@ -112,10 +112,7 @@ def _fit_pairs(src, dst, m, tx, ty, th):
         sy += src[k, 1]
         dx += dst[k, 0]
         dy += dst[k, 1]
-    sx /= m
-    sy /= m
-    dx /= m
-    dy /= m
+    sx, sy, dx, dy = sx / m, sy / m, dx / m, dy / m   # the centroids
     num = 0.0
     den = 0.0
     for k in range(m):
