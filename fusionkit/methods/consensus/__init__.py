@@ -12,8 +12,10 @@ For every pair of maps, candidate placements come from two independent sources:
   the translations that put the most walls on walls and the fewest on open floor, by FFT
   correlation (:mod:`._search`).
 
-Each candidate is refined on the full maps' walls (ICP on the distance field, optionally the
-paper's PSO of eq. 3 in a small box) and verified both ways (:func:`verify`): the fraction of
+Each candidate is refined on the full maps' walls (ICP on the distance field; the best ones
+also turned a degree or two either way and refined again, as ICP can settle a degree off on a
+cluttered map; optionally the paper's PSO of eq. 3 in a small box) and verified both ways
+(:func:`verify`): the fraction of
 each map's walls, where the other map is known, that lie within one cell of the other's walls,
 and the walls drawn on the other's clear free space. The decision does not rest on thresholds in
 metres, cells or percent: the best placement's evidence is judged against the evidence the same

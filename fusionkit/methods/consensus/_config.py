@@ -126,6 +126,10 @@ class ConsensusConfig:
         after ICP.
     pso_top : int
         See ``pso_refine``.
+    turns, turn_step : int, float
+        The best placement, and each candidate that could rival it, is turned about the moving
+        map's walls by ``turn_step`` degrees up to ``turns`` times either way and refined again
+        (ICP can settle a degree off on cluttered maps); a better fit replaces it. 0 turns: off.
     polish : bool
         After the test, refine the placements handed on (the best and each plausible one) with
         walls paired from the points themselves (:mod:`._polish`): the search's pairing is a
@@ -201,6 +205,8 @@ class ConsensusConfig:
     alias_peaks: int = 6
     pso_refine: bool = True
     pso_top: int = 4
+    turns: int = 2
+    turn_step: float = 1.0
     polish: bool = True
     fallback: bool = True
     fallback_step: float = 2.0
@@ -237,15 +243,17 @@ class ConsensusConfig:
         for name in ("scan_clusters", "rotation_peaks", "translations", "refine_top", "max_poses",
                      "max_refine_points", "coarse_points", "pso_top", "alias_peaks", "coarse_side",
                      "threads", "null_samples", "fallback_rotations",
-                     "null_wide_points", "candidates"):
+                     "null_wide_points", "candidates", "turns"):
             v = getattr(self, name)
             least = 0 if name in ("scan_clusters", "alias_peaks", "threads",
-                                  "fallback_rotations", "null_wide_points", "candidates") else (
+                                  "fallback_rotations", "null_wide_points", "candidates",
+                                  "turns") else (
                 8 if name == "null_samples" else 1)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < least:
                 raise InputError(f"{name} must be a whole number >= {least}, got {v!r}")
         for name in ("coarse", "pose_spacing", "distinct_cells", "loop_cells", "fallback_step",
-                     "cloud_shift", "wall_correlation", "wall_correlation_max", "test_basin"):
+                     "cloud_shift", "wall_correlation", "wall_correlation_max", "test_basin",
+                     "turn_step"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a positive number, got {v!r}")
