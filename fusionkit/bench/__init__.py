@@ -11,6 +11,12 @@ Each case is made from one ground-truth map (a *world*) and a seed, in one of tw
     ``K`` overlapping square windows are cut from the world, each turned by a random angle,
     shifted by a random offset and resampled into a frame of its own: the classic map-merging
     benchmark. These maps come without scans.
+``log``
+    a real CARMEN laser log (a *log world*, :func:`find_logs`) cut into ``K`` consecutive
+    sessions sharing 30 % of their length, each mapped in the frame of its first pose with its
+    recorded scans, as ``fusionkit import carmen --split K`` writes them; the world is the map
+    of the whole log and the truth the log's corrected poses. Every log world gives one case for
+    each ``K`` of ``robots``, besides the ``cases`` drawn from the map worlds.
 
 The *overlap* of two maps is the share of the smaller one's known cells (in the world) that the
 other also knows. Cases are drawn so that every map overlaps another one by at least
@@ -42,13 +48,15 @@ public name is also importable from :mod:`fusionkit.bench` itself.
 
 from __future__ import annotations
 
-from .cases import Case, CaseSpec, WorldSpec, find_worlds, load_world, make_case, plan_cases
+from .cases import (LOG_SPLIT, Case, CaseSpec, WorldSpec, find_logs, find_worlds, load_log,
+                    load_world, make_case, plan_cases)
 from .config import (DEFAULT_METHODS, MIN_MAP_WALLS, MIN_WORLD_OCCUPIED, MODES, OVERLAP_BINS,
                      BenchConfig)
 from .report import format_markdown, format_table, summarize, write_outputs
 from .runner import BenchResult, run_bench, run_case
 
-__all__ = ["BenchConfig", "WorldSpec", "CaseSpec", "Case", "find_worlds", "plan_cases", "make_case",
+__all__ = ["BenchConfig", "WorldSpec", "CaseSpec", "Case", "find_worlds", "find_logs", "plan_cases",
+           "make_case", "load_log", "LOG_SPLIT",
            "run_case", "BenchResult", "run_bench", "summarize", "format_markdown", "write_outputs",
            "MODES", "DEFAULT_METHODS", "OVERLAP_BINS", "load_world", "format_table",
            "MIN_WORLD_OCCUPIED", "MIN_MAP_WALLS"]

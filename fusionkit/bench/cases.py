@@ -1,5 +1,6 @@
-"""Case making: the worlds (ground-truth maps) and the seeded cases drawn from them
-(``explore``: simulated robots; ``crop``: turned and shifted windows).
+"""Case making: the worlds (ground-truth maps, and real laser logs) and the seeded cases drawn
+from them (``explore``: simulated robots; ``crop``: turned and shifted windows; ``log``: a log
+split into sessions).
 """
 
 from __future__ import annotations
@@ -19,16 +20,24 @@ from ..resample import canvas_for, resample
 from ..transform import Transform2D
 from .config import MIN_MAP_WALLS, MIN_WORLD_OCCUPIED, BenchConfig
 
-__all__ = ["WorldSpec", "CaseSpec", "Case", "find_worlds", "plan_cases", "make_case"]
+__all__ = ["WorldSpec", "CaseSpec", "Case", "find_worlds", "find_logs", "plan_cases", "make_case",
+           "LOG_SPLIT"]
+
+#: How a log is cut into sessions and mapped (``fusionkit import carmen --split K``'s defaults):
+#: consecutive sessions share this fraction of their length; cells of this size (m); a beam
+#: without a return clears nothing
+LOG_SPLIT = {"overlap": 0.3, "resolution": 0.05, "no_return_free": 0.0}
 
 
 @dataclass(frozen=True)
 class WorldSpec:
-    """A ground-truth map: a map file (``path``) or a built-in world (``builtin`` name)."""
+    """A ground-truth map: a map file (``path``) or a built-in world (``builtin`` name); or a
+    CARMEN laser log (``log``), whose world is the map of the whole log."""
 
     name: str
     path: str | None = None
     builtin: str | None = None
+    log: str | None = None
 
 
 #: Worlds handed to this process with the cases (:func:`given_worlds`), by spec
@@ -36,8 +45,9 @@ _GIVEN: dict = {}
 
 
 def given_worlds(worlds: dict) -> None:
-    """Have :func:`load_world` answer the specs of ``worlds`` (``{WorldSpec: grid}``) with the
-    grids given: a worker on another machine need not hold the map files at the same path."""
+    """Have :func:`load_world` answer the specs of ``worlds`` (``{WorldSpec: grid}``, and
+    :func:`load_log` ``{WorldSpec: ScanLog}`` for logs) with what is given: a worker on another
+    machine need not hold the map or log files at the same path."""
     global _GIVEN
     _GIVEN = worlds
 
@@ -45,13 +55,35 @@ def given_worlds(worlds: dict) -> None:
 def load_world(spec: WorldSpec) -> OccupancyGrid:
     """The world's grid in its three states (cached per process; a world handed over by
     :func:`given_worlds` is not read again)."""
-    given = _GIVEN.get(spec)
+    given = _GIVEN.get(spec) if spec.log is None else None
     return given if given is not None else _load_world(spec)
+
+
+def load_log(spec: WorldSpec):
+    """The scans of a log world (a :class:`~fusionkit.scanlog.ScanLog` in the log's frame; cached
+    per process; a log handed over by :func:`given_worlds` is not read again)."""
+    given = _GIVEN.get(spec)
+    return given if given is not None else _load_log(spec.log)
+
+
+@lru_cache(maxsize=8)
+def _load_log(path: str):
+    from ..io_carmen import read_carmen
+    return read_carmen(path).scans
+
+
+def _log_grid(scans, name: str) -> OccupancyGrid:
+    from ..io_carmen import mapping_config
+    from ..mapping import build_grid
+    return build_grid(scans, mapping_config(LOG_SPLIT["resolution"], LOG_SPLIT["no_return_free"]),
+                      name=name)
 
 
 @lru_cache(maxsize=32)
 def _load_world(spec: WorldSpec) -> OccupancyGrid:
-    if spec.builtin is not None:
+    if spec.log is not None:
+        g = _log_grid(load_log(spec), spec.name)
+    elif spec.builtin is not None:
         from ..worlds import make_world
         g = make_world(spec.builtin, 0)
     else:
@@ -121,6 +153,49 @@ def find_worlds(folders: Sequence[str | os.PathLike] = (), builtin: Sequence[str
     return worlds, skipped
 
 
+def find_logs(paths: Sequence[str | os.PathLike]) -> tuple[list, list]:
+    """The CARMEN logs among ``paths`` (files, or folders whose ``*.log`` files are taken,
+    sorted), each read once to check it. Returns ``(worlds, skipped)`` as :func:`find_worlds`
+    does: a :class:`WorldSpec` per readable log (named as ``fusionkit import carmen`` names it,
+    ``intel.gfs.log`` -> ``intel``) and ``(name, reason)`` for the others.
+
+    Raises
+    ------
+    InputError
+        A path that does not exist, or a folder without a ``*.log`` file.
+    """
+    from ..io_carmen import default_name
+    files = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(p.glob("*.log"))
+            if not found:
+                raise InputError(f"{p}: the folder holds no CARMEN log (*.log); give log files or "
+                                 f"a folder of them")
+            files += found
+        elif p.is_file():
+            files.append(p)
+        else:
+            raise InputError(f"{p}: no such CARMEN log or folder of logs")
+    worlds, skipped, seen = [], [], set()
+    for f in files:
+        name = default_name(f)
+        if name in seen:
+            name = f"{f.parent.name}/{name}"
+        spec = WorldSpec(name, log=str(f))
+        try:
+            scans = load_log(spec)
+        except FusionkitError as exc:
+            skipped.append((name, str(exc)))
+            continue
+        if scans.n_scans < 20:
+            skipped.append((name, f"only {scans.n_scans} scans, needs 20"))
+            continue
+        worlds.append(spec)
+        seen.add(name)
+    return worlds, skipped
+
+
 @dataclass(frozen=True)
 class CaseSpec:
     """What to build: case ``index`` on ``world`` in ``mode`` with ``robots`` maps."""
@@ -163,16 +238,22 @@ class Case:
 
 
 def plan_cases(worlds: Sequence[WorldSpec], config: BenchConfig) -> list[CaseSpec]:
-    """The suite: case ``i`` takes world ``i mod W``, mode ``(i // W) mod M`` and K
-    ``(i + i // (W M)) mod R`` (so every world meets every mode and K as the suite grows), and a
-    seed drawn from the suite's seed and ``i``."""
-    W, M, R = len(worlds), len(config.modes), len(config.robots)
-    out = []
-    for i in range(config.cases):
-        out.append(CaseSpec(i, worlds[i % W], config.modes[(i // W) % M],
-                            config.robots[(i + i // (W * M)) % R],
-                            int(np.random.SeedSequence([config.seed, i]).generate_state(1)[0] % 2**31)))
-    return out
+    """The suite: ``config.cases`` cases of the maps, case ``i`` taking map world ``i mod W``,
+    mode ``(i // W) mod M`` and K ``(i + i // (W M)) mod R`` (so every world meets every mode
+    and K as the suite grows); then every log world split into each K of ``config.robots``, one
+    case each (mode ``log``). Each case's seed is drawn from the suite's seed and its index."""
+    maps = [w for w in worlds if w.log is None]
+    logs = [w for w in worlds if w.log is not None]
+    W, M, R = len(maps), len(config.modes), len(config.robots)
+    todo = [(maps[i % W], config.modes[(i // W) % M], config.robots[(i + i // (W * M)) % R])
+            for i in range(config.cases if maps else 0)]
+    todo += [(w, "log", k) for w in logs for k in config.robots]
+    if not todo:
+        raise InputError("no case to run: give --cases 1 or more with a world to draw them from, "
+                         "or logs to split (--logs)")
+    return [CaseSpec(i, w, mode, k, int(np.random.SeedSequence([config.seed, i]).generate_state(1)[0]
+                                        % 2**31))
+            for i, (w, mode, k) in enumerate(todo)]
 
 
 def _overlaps(masks: list) -> np.ndarray:
@@ -314,9 +395,30 @@ def _explore_case(spec: CaseSpec, world: OccupancyGrid, config: BenchConfig) -> 
                 tuple(r.transform for r in sim.robots), ov, linked)
 
 
+def _log_case(spec: CaseSpec, world: OccupancyGrid, config: BenchConfig) -> Case:
+    """The log cut into K sessions, each mapped in its own start frame with its recorded scans,
+    as ``fusionkit import carmen --split K`` writes them; the truth is where each session's
+    first pose lies in the log's frame (the world's)."""
+    from ..io_carmen import split_sessions, to_own_frame
+    log = load_log(spec.world)
+    grids, scans, truth = [], [], []
+    for n, (a, b) in enumerate(split_sessions(log.n_scans, spec.robots, LOG_SPLIT["overlap"])):
+        own, t = to_own_frame(log.subset(slice(a, b)))
+        g = _log_grid(own, f"robot_{n + 1}")
+        grids.append(g)
+        scans.append(own)
+        truth.append(t)
+    masks = [resample(g, t, world).known_mask() & world.known_mask() for g, t in zip(grids, truth)]
+    ov = _overlaps(masks)
+    return Case(spec, world, tuple(grids), tuple(scans), tuple(truth), ov,
+                _linked(ov, config.min_overlap, grids))
+
+
 def make_case(spec: CaseSpec, config: BenchConfig) -> Case:
     """Build the maps, scans and truth of one case."""
     world = load_world(spec.world)
+    if spec.mode == "log":
+        return _log_case(spec, world, config)
     if spec.mode == "crop":
         return _crop_case(spec, world, config)
     return _explore_case(spec, world, config)

@@ -39,7 +39,7 @@ class BenchConfig:
     robots : tuple of int
         Numbers of maps per case (2 to 5), cycled over the cases.
     cases : int
-        Number of cases.
+        Number of cases drawn from the map worlds (a log world adds one case per K besides).
     min_overlap : float
         Least overlap (0..1) linking each map to another.
     max_overlap : float
@@ -94,8 +94,8 @@ class BenchConfig:
             raise InputError(f"modes must be among {', '.join(MODES)}, got {', '.join(self.modes) or 'none'}")
         if not self.robots or any(not 2 <= k <= 5 for k in self.robots):
             raise InputError(f"robots per case must be between 2 and 5, got {self.robots}")
-        if self.cases < 1:
-            raise InputError(f"cases must be >= 1, got {self.cases}")
+        if self.cases < 0:
+            raise InputError(f"cases must be >= 0, got {self.cases}")
         if not isinstance(self.seed, numbers.Integral) or isinstance(self.seed, bool) or self.seed < 0:
             raise InputError(f"the seed must be a whole number >= 0, got {self.seed!r}")
         if not 0.0 < self.min_overlap < self.max_overlap <= 1.0:

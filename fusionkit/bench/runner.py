@@ -15,7 +15,7 @@ from ..errors import FusionkitError, InputError
 from ..executor import Executor, InProcess, LocalProcesses
 from ..grid import OccupancyGrid
 from ..transform import Transform2D
-from .cases import CaseSpec, WorldSpec, given_worlds, load_world, make_case, plan_cases
+from .cases import CaseSpec, WorldSpec, given_worlds, load_log, load_world, make_case, plan_cases
 from .config import BenchConfig
 
 __all__ = ["run_case", "BenchResult", "run_bench"]
@@ -142,6 +142,7 @@ def run_bench(worlds: Sequence[WorldSpec], config: BenchConfig, *, jobs: int = 1
     # the worlds read from files go with the cases: a worker elsewhere (a Dask cluster) has
     # neither the files nor the folder their paths are relative to
     worlds_used = {s.world: load_world(s.world) for s in specs if s.world.path is not None}
+    worlds_used.update({s.world: load_log(s.world) for s in specs if s.world.log is not None})
     records = ex.map(_run_one, tasks, shared=(config, worlds_used), progress=tick)
     showcase = records[show].pop("_grids", None)
     if showcase is not None:

@@ -21,7 +21,8 @@ def register(sub) -> None:
         description="Make seeded cases from a folder of ground-truth maps (ROS map_server YAML) "
                     "and run every method on the same cases: 'explore' cases are simulated robots "
                     "exploring a map (own-frame maps with scans), 'crop' cases are overlapping "
-                    "windows of a map, each turned and shifted at random (no scans). A pair (a "
+                    "windows of a map, each turned and shifted at random (no scans); with --logs, "
+                    "'log' cases are real laser logs split into sessions. A pair (a "
                     "non-reference map of a case) is a success when merged with a rotation error "
                     "below --max-rotation and its centroid within --max-cells of the truth, a wrong "
                     "merge when merged outside those bounds, a refusal when not merged. Prints the "
@@ -33,13 +34,19 @@ def register(sub) -> None:
     p.add_argument("--worlds", nargs="*", choices=list(WORLDS), default=None, metavar="NAME",
                    help=f"built-in worlds to add ({', '.join(WORLDS)}); default: all of them when no "
                         f"folder is given, none otherwise")
+    p.add_argument("--logs", nargs="+", default=[], metavar="LOG",
+                   help="CARMEN laser logs (files, or folders of *.log) to add as 'log' cases: each "
+                        "log split into K sessions for every K of --robots (one case each, beside "
+                        "the --cases drawn from the maps), the sessions' maps with their recorded "
+                        "scans, as 'fusionkit import carmen --split K' writes them; the truth is "
+                        "the log's corrected poses. With --cases 0, the logs alone")
     p.add_argument("--methods", nargs="+", choices=METHODS, default=list(DEFAULT_METHODS), metavar="M",
                    help=f"methods to compare (default: {' '.join(DEFAULT_METHODS)}"
                         f"{''.join(f'; also {m}' for m in METHODS if m not in DEFAULT_METHODS)})")
     p.add_argument("--modes", nargs="+", choices=MODES, default=list(d.modes),
                    help=f"kinds of case (default: {' '.join(d.modes)})")
-    p.add_argument("--cases", type=int_range(1, 100000), default=d.cases,
-                   help=f"number of cases (default {d.cases}); the worlds are cycled, then the "
+    p.add_argument("--cases", type=int_range(0, 100000), default=d.cases,
+                   help=f"number of cases drawn from the maps (default {d.cases}); the worlds are cycled, then the "
                         f"modes (one mode per round of worlds, so fewer cases than worlds are all "
                         f"of the first mode), and K")
     p.add_argument("--robots", nargs="+", type=int_range(2, 5), default=list(d.robots), metavar="K",
@@ -83,7 +90,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from ..bench import BenchConfig, find_worlds, format_table, run_bench, summarize, write_outputs
+    from ..bench import (BenchConfig, find_logs, find_worlds, format_table, run_bench, summarize,
+                         write_outputs)
     from ..progress import ProgressBar
 
     folders = list(args.folders)
@@ -103,9 +111,20 @@ def run(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder; choose another --out")
-    worlds, skipped = find_worlds(folders, builtin)
+    if args.cases == 0 and not args.logs:
+        raise InputError("--cases 0 leaves no case to run: give --cases 1 or more, or logs to split "
+                         "(--logs)")
+    logs, skipped = find_logs(args.logs)
+    if args.logs and not logs:
+        raise InputError("no readable CARMEN log among --logs: " + "; ".join(f"{n}: {w}" for n, w in skipped))
+    use_maps = args.cases > 0
+    worlds = []
+    if use_maps:
+        worlds, more = find_worlds(folders, builtin)
+        skipped += more
+    worlds += logs
     progress = ProgressBar("bench", unit="cases", enabled=False if args.quiet else None)
-    if not args.folders and not args.quiet:
+    if not args.folders and use_maps and not args.quiet:
         # the default folders are relative to where the command runs: say what was found
         print("no folder given: the maps of " + " and ".join(f"./{f}" for f in folders)
               + ", and the built-in worlds" if folders else

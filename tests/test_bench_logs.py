@@ -1,0 +1,112 @@
+"""``fusionkit bench --logs``: real laser logs split into sessions as cases of the suite. A log
+case holds what ``fusionkit import carmen --split K`` writes, is scored on the log's corrected
+poses, runs the same wherever it runs, and bad log arguments get one line and exit 2."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusionkit.bench import BenchConfig, WorldSpec, find_logs, make_case, plan_cases, run_bench
+from fusionkit.cli import main
+from fusionkit.io_carmen import import_carmen
+from fusionkit.mapio import load_map
+from fusionkit.scanlog import load_scans
+from fusionkit.transform import Transform2D
+
+REPO = Path(__file__).resolve().parents[1]
+LOGS = REPO.parent / "shared" / "logs" / "real"
+OREBRO = LOGS / "orebro.gfs.log"
+OFFICE = WorldSpec("office", builtin="office")
+
+
+def test_a_log_case_holds_the_maps_scans_and_truth_the_split_import_writes(tmp_path):
+    import_carmen(OREBRO, tmp_path, split=3)
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    (spec,), _ = find_logs([OREBRO])
+    assert spec.name == "orebro"
+    case = make_case(plan_cases([spec], BenchConfig(cases=0, robots=(3,)))[0], BenchConfig())
+    assert case.spec.mode == "log" and len(case.grids) == 3
+    for k, (g, s, t) in enumerate(zip(case.grids, case.scans, case.truth)):
+        written = load_map(tmp_path / f"robot_{k + 1}.yaml")
+        assert np.array_equal(g.data, written.data) and g.origin == pytest.approx(written.origin)
+        assert np.array_equal(s.poses, load_scans(tmp_path / f"robot_{k + 1}.scans.npz").poses)
+        true = Transform2D(**truth["robots"][k]["transform"])
+        assert t.error_to(true) == pytest.approx((0.0, 0.0), abs=1e-12)
+    world = load_map(tmp_path / "world.yaml")
+    assert np.array_equal(case.world.data, world.trinary())
+    # consecutive sessions share 30 % of their length: each overlaps the one before it
+    assert all(case.overlap[k, k + 1] > 0.3 for k in range(2)) and all(case.linked)
+
+
+def test_every_log_gives_one_case_per_k_after_the_cases_of_the_maps():
+    (orebro,), _ = find_logs([OREBRO])
+    specs = plan_cases([OFFICE, orebro], BenchConfig(cases=3, robots=(2, 4), modes=("crop",)))
+    assert [(s.world.name, s.mode) for s in specs[:3]] == [("office", "crop")] * 3
+    assert [(s.world.name, s.mode, s.robots) for s in specs[3:]] == [("orebro", "log", 2),
+                                                                    ("orebro", "log", 4)]
+    assert [s.index for s in specs] == list(range(5))
+    # the map cases are those of a suite without the log, seeds included
+    assert specs[:3] == plan_cases([OFFICE], BenchConfig(cases=3, robots=(2, 4), modes=("crop",)))
+
+
+def test_bench_scores_the_sessions_of_a_log_alone_and_the_same_in_worker_processes(tmp_path, capsys):
+    out = tmp_path / "b"
+    assert main(["bench", "--logs", str(OREBRO), "--cases", "0", "--robots", "2", "3",
+                 "--methods", "consensus", "map-merge", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "2 cases on 1 of 1 worlds" in text and "no folder given" not in text
+    rec = json.loads((out / "bench.json").read_text())
+    assert [(c["world"], c["mode"], c["robots"]) for c in rec["cases"]] == [("orebro", "log", 2),
+                                                                          ("orebro", "log", 3)]
+    consensus = rec["summary"]["methods"]["consensus"]
+    assert consensus["pairs"] == 3 and consensus["success"] == 3 and consensus["wrong"] == 0
+    assert rec["summary"]["by"]["mode"]["log"]["consensus"]["success"] == 3
+    # workers get the log's scans with the cases, not its path (gone here once it was read):
+    # the same figures
+    shutil.copy(OREBRO, tmp_path / "orebro.gfs.log")
+    (spec,), _ = find_logs([tmp_path / "orebro.gfs.log"])
+    (tmp_path / "orebro.gfs.log").unlink()
+    cfg = BenchConfig(methods=("consensus",), cases=0, robots=(2,))
+    strip = [json.dumps({k: v for k, v in c.items() if k != "build_seconds"}
+                        | {"methods": {m: {k: v for k, v in r.items() if "seconds" not in k}
+                                       for m, r in c["methods"].items()}}, default=float)
+             for run in (run_bench([spec], cfg), run_bench([spec], cfg, jobs=2)) for c in run.cases]
+    assert strip[0] == strip[1]
+
+
+def test_a_folder_of_logs_takes_every_log_and_sets_aside_an_unreadable_one(tmp_path):
+    shutil.copy(OREBRO, tmp_path / "orebro.gfs.log")
+    (tmp_path / "notes.log").write_text("this is not a laser log\n")
+    worlds, skipped = find_logs([tmp_path])
+    assert [w.name for w in worlds] == ["orebro"]
+    assert [n for n, _ in skipped] == ["notes"] and skipped[0][1]
+
+
+def _bad(tmp: Path, kind: str) -> list:
+    if kind == "missing":
+        return ["--logs", str(tmp / "nowhere.log")]
+    if kind == "empty folder":
+        (tmp / "sub").mkdir()
+        return ["--logs", str(tmp / "sub")]
+    if kind == "not a log":
+        (tmp / "bad.log").write_text("this is not a laser log\n")
+        return ["--logs", str(tmp / "bad.log")]
+    return ["--cases", "0"]
+
+
+@pytest.mark.parametrize("kind, says", [
+    ("missing", "nowhere.log: no such CARMEN log or folder of logs"),
+    ("empty folder", "the folder holds no CARMEN log (*.log)"),
+    ("not a log", "no readable CARMEN log among --logs: bad: "),
+    ("no case", "--cases 0 leaves no case to run"),
+])
+def test_bad_log_arguments_get_one_line_and_exit_2(tmp_path, capsys, kind, says):
+    code = main(["bench", *_bad(tmp_path, kind), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and says in err[0], err
+    assert not (tmp_path / "out").exists()
