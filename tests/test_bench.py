@@ -177,3 +177,22 @@ def test_without_folders_it_says_which_maps_it_benches_on(tmp_path, monkeypatch,
                  "--worlds", "cave", "--out", str(tmp_path / "out")]) == 0
     said = capsys.readouterr()
     assert "no ./maps or ./maps/real here: the built-in worlds only" in said.out + said.err
+
+
+def test_a_wall_one_cell_wide_stays_in_the_picture_of_a_large_floor():
+    """A bench picture is about 560 pixels across; a floor of 1500 cells drawn cell for cell
+    there kept one column in three and lost most walls one cell wide. Each block of cells now
+    shows its highest label: the wall (5) over free floor (2) and unknown (0)."""
+    from fusionkit.bench.report import _PIXELS, _pooled
+    img = np.full((1200, 1500), 2, np.int8)
+    img[:, :40] = 0
+    img[600, 40:] = 5                                 # a wall along a row
+    img[:, 777] = 5                                   # and one along a column
+    out = _pooled(img, _PIXELS)
+    assert max(out.shape) <= _PIXELS and out.shape == (400, 500)
+    assert (out == 5).any(axis=1).all()               # the column wall in every row of pixels
+    assert (out[200, 14:] == 5).all()                 # the row wall, whole
+    assert ((out == 5).sum(axis=1) > 100).sum() == 1  # in one row of pixels
+    assert (out[:, :13] == 0).all() and (out[:, 14:] >= 2).all()
+    small = img[:300, :400]
+    assert _pooled(small, _PIXELS) is small           # a small map is drawn cell for cell

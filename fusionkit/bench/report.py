@@ -187,6 +187,23 @@ def _json_default(o):
     raise TypeError(type(o).__name__)
 
 
+#: Pixels across the map in a bench picture (7 inches at 90 dpi, less the margins)
+_PIXELS = 560
+
+
+def _pooled(img: np.ndarray, pixels: int) -> np.ndarray:
+    """``img`` (labels ranked so that the higher one should show) shrunk to at most ``pixels``
+    across by keeping each block's highest label: walls one cell wide stay in the picture of a
+    floor of thousands of cells, where drawing every ``k``-th cell drops most of them."""
+    k = -(-max(img.shape) // pixels)
+    if k <= 1:
+        return img
+    r, c = -(-img.shape[0] // k) * k, -(-img.shape[1] // k) * k
+    pad = np.zeros((r, c), img.dtype)
+    pad[:img.shape[0], :img.shape[1]] = img
+    return pad.reshape(r // k, k, c // k, k).max(axis=(1, 3))
+
+
 def _render(showcase: dict, method: str, record: dict) -> bytes:
     """One picture of the showcase case for ``method``: its fused map placed in the world by
     the reference's true transform, over the world's walls."""
@@ -211,7 +228,8 @@ def _render(showcase: dict, method: str, record: dict) -> bytes:
     c0, c1 = known[1].min(), known[1].max() + 1
     cmap = ListedColormap(["#d0d0d0", "#f4f4f4", "#ffffff", "#9ab0d8", "#d62728", "#1a1a1a"])
     fig, ax = plt.subplots(figsize=(7, 7 * (r1 - r0) / max(c1 - c0, 1) + 0.8))
-    ax.imshow(img[r0:r1, c0:c1], origin="lower", cmap=cmap, vmin=-0.5, vmax=5.5, interpolation="nearest")
+    ax.imshow(_pooled(img[r0:r1, c0:c1], _PIXELS), origin="lower", cmap=cmap, vmin=-0.5,
+              vmax=5.5, interpolation="nearest")
     st = [f"map {e['map'] + 1} {e['status']}" for e in record["maps"]]
     ax.set_title(f"{method}: case {showcase['index']} ({record.get('world', '')}; the same case for "
                  f"every method)\n{', '.join(st)}\nblack: walls on the truth, red: walls off "
