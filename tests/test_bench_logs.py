@@ -5,6 +5,7 @@ poses, runs the same wherever it runs, and bad log arguments get one line and ex
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import pytest
 
 from fusionkit.bench import BenchConfig, WorldSpec, find_logs, make_case, plan_cases, run_bench
 from fusionkit.cli import main
+from fusionkit.errors import InputError
 from fusionkit.io_carmen import import_carmen
 from fusionkit.mapio import load_map
 from fusionkit.scanlog import load_scans
@@ -84,7 +86,19 @@ def test_a_folder_of_logs_takes_every_log_and_sets_aside_an_unreadable_one(tmp_p
     (tmp_path / "notes.log").write_text("this is not a laser log\n")
     worlds, skipped = find_logs([tmp_path])
     assert [w.name for w in worlds] == ["orebro"]
-    assert [n for n, _ in skipped] == ["notes"] and skipped[0][1]
+    assert [n for n, _ in skipped] == ["notes"] and "no FLASER or ROBOTLASER1" in skipped[0][1]
+    # named on its own, the same file is bad input
+    with pytest.raises(InputError, match="notes.log: no FLASER or ROBOTLASER1"):
+        find_logs([tmp_path, tmp_path / "notes.log"])
+    # a log given twice (by two paths, or in a folder given too) is one log
+    again, _ = find_logs([tmp_path / "orebro.gfs.log", tmp_path,
+                          tmp_path / ".." / tmp_path.name / "orebro.gfs.log"])
+    assert [w.name for w in again] == ["orebro"]
+    # a log named as a world of maps (or as another log) is told apart in the tables
+    (tmp_path / "more").mkdir()
+    shutil.copy(OREBRO, tmp_path / "more" / "orebro.log")
+    two, _ = find_logs([tmp_path, tmp_path / "more"], taken=["office", "orebro"])
+    assert [w.name for w in two] == ["orebro (log)", "orebro (log 2)"]
 
 
 def _bad(tmp: Path, kind: str) -> list:
@@ -96,13 +110,21 @@ def _bad(tmp: Path, kind: str) -> list:
     if kind == "not a log":
         (tmp / "bad.log").write_text("this is not a laser log\n")
         return ["--logs", str(tmp / "bad.log")]
+    if kind == "one bad of two":
+        (tmp / "bad.log").write_text("this is not a laser log\n")
+        return ["--logs", str(OREBRO), str(tmp / "bad.log"), "--cases", "0"]
+    if kind == "fifo":
+        os.mkfifo(tmp / "fifo.log")
+        return ["--logs", str(tmp / "fifo.log")]
     return ["--cases", "0"]
 
 
 @pytest.mark.parametrize("kind, says", [
     ("missing", "nowhere.log: no such CARMEN log or folder of logs"),
     ("empty folder", "the folder holds no CARMEN log (*.log)"),
-    ("not a log", "no readable CARMEN log among --logs: bad: "),
+    ("not a log", "bad.log: no FLASER or ROBOTLASER1 records"),
+    ("fifo", "fifo.log: is not a regular file"),
+    ("one bad of two", "bad.log: no FLASER or ROBOTLASER1 records"),
     ("no case", "--cases 0 leaves no case to run"),
 ])
 def test_bad_log_arguments_get_one_line_and_exit_2(tmp_path, capsys, kind, says):

@@ -153,16 +153,19 @@ def find_worlds(folders: Sequence[str | os.PathLike] = (), builtin: Sequence[str
     return worlds, skipped
 
 
-def find_logs(paths: Sequence[str | os.PathLike]) -> tuple[list, list]:
+def find_logs(paths: Sequence[str | os.PathLike], taken: Sequence[str] = ()) -> tuple[list, list]:
     """The CARMEN logs among ``paths`` (files, or folders whose ``*.log`` files are taken,
-    sorted), each read once to check it. Returns ``(worlds, skipped)`` as :func:`find_worlds`
-    does: a :class:`WorldSpec` per readable log (named as ``fusionkit import carmen`` names it,
-    ``intel.gfs.log`` -> ``intel``) and ``(name, reason)`` for the others.
+    sorted), each read once to check it; a log given twice (by two paths, or in a folder given
+    too) is taken once. Returns ``(worlds, skipped)`` as :func:`find_worlds` does: a
+    :class:`WorldSpec` per readable log, named as ``fusionkit import carmen`` names it
+    (``intel.gfs.log`` -> ``intel``; ``intel (log)`` when a world of ``taken`` or another log
+    has that name), and ``(name, reason)`` for the logs of a folder that cannot be used.
 
     Raises
     ------
     InputError
-        A path that does not exist, or a folder without a ``*.log`` file.
+        A path that does not exist or is no file nor folder, a folder without a ``*.log``
+        file, or a log named on its own that cannot be used (one line naming it).
     """
     from ..io_carmen import default_name
     files = []
@@ -172,24 +175,34 @@ def find_logs(paths: Sequence[str | os.PathLike]) -> tuple[list, list]:
             if not found:
                 raise InputError(f"{p}: the folder holds no CARMEN log (*.log); give log files or "
                                  f"a folder of them")
-            files += found
+            files += [(f, False) for f in found]
         elif p.is_file():
-            files.append(p)
+            files.append((p, True))
+        elif p.exists():
+            raise InputError(f"{p}: is not a regular file; give a CARMEN log file or a folder of them")
         else:
             raise InputError(f"{p}: no such CARMEN log or folder of logs")
-    worlds, skipped, seen = [], [], set()
-    for f in files:
-        name = default_name(f)
-        if name in seen:
-            name = f"{f.parent.name}/{name}"
+    unique: dict = {}
+    for f, named in files:
+        first, was = unique.get(os.path.realpath(f), (f, False))
+        unique[os.path.realpath(f)] = (first, was or named)
+    worlds, skipped, seen = [], [], set(taken)
+    for f, named in unique.values():
+        name = base = default_name(f)
+        n = 1
+        while name in seen:
+            name = f"{base} (log)" if n == 1 else f"{base} (log {n})"
+            n += 1
         spec = WorldSpec(name, log=str(f))
         try:
             scans = load_log(spec)
+            why = "" if scans.n_scans >= 20 else f"only {scans.n_scans} scans, needs 20"
         except FusionkitError as exc:
-            skipped.append((name, str(exc)))
-            continue
-        if scans.n_scans < 20:
-            skipped.append((name, f"only {scans.n_scans} scans, needs 20"))
+            why = str(exc)
+        if why and named:
+            raise InputError(why if why.startswith(str(f)) else f"{f}: {why}")
+        if why:
+            skipped.append((name, why))
             continue
         worlds.append(spec)
         seen.add(name)

@@ -114,15 +114,13 @@ def run(args) -> int:
     if args.cases == 0 and not args.logs:
         raise InputError("--cases 0 leaves no case to run: give --cases 1 or more, or logs to split "
                          "(--logs)")
-    logs, skipped = find_logs(args.logs)
-    if args.logs and not logs:
-        raise InputError("no readable CARMEN log among --logs: " + "; ".join(f"{n}: {w}" for n, w in skipped))
     use_maps = args.cases > 0
-    worlds = []
-    if use_maps:
-        worlds, more = find_worlds(folders, builtin)
-        skipped += more
+    worlds, skipped = find_worlds(folders, builtin) if use_maps else ([], [])
+    logs, more = find_logs(args.logs, taken=[w.name for w in worlds])
+    if args.logs and not logs:
+        raise InputError("no usable CARMEN log among --logs: " + "; ".join(f"{n}: {w}" for n, w in more))
     worlds += logs
+    skipped += more
     progress = ProgressBar("bench", unit="cases", enabled=False if args.quiet else None)
     if not args.folders and use_maps and not args.quiet:
         # the default folders are relative to where the command runs: say what was found
