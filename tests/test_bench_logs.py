@@ -52,8 +52,12 @@ def test_every_log_gives_one_case_per_k_after_the_cases_of_the_maps():
     assert [(s.world.name, s.mode, s.robots) for s in specs[3:]] == [("orebro", "log", 2),
                                                                     ("orebro", "log", 4)]
     assert [s.index for s in specs] == list(range(5))
-    # the map cases are those of a suite without the log, seeds included
+    # the map cases are those of a suite without the log, seeds included; a log case's seed
+    # is the same whatever the suite holds beside it (its merges are seeded by it)
     assert specs[:3] == plan_cases([OFFICE], BenchConfig(cases=3, robots=(2, 4), modes=("crop",)))
+    alone = plan_cases([orebro], BenchConfig(cases=0, robots=(4, 2)))
+    assert {(s.robots, s.seed) for s in alone} == {(s.robots, s.seed) for s in specs[3:]}
+    assert len({s.seed for s in specs}) == 5
 
 
 def test_bench_scores_the_sessions_of_a_log_alone_and_the_same_in_worker_processes(tmp_path, capsys):
@@ -87,6 +91,18 @@ def test_a_folder_of_logs_takes_every_log_and_sets_aside_an_unreadable_one(tmp_p
     worlds, skipped = find_logs([tmp_path])
     assert [w.name for w in worlds] == ["orebro"]
     assert [n for n, _ in skipped] == ["notes"] and "no FLASER or ROBOTLASER1" in skipped[0][1]
+    # a log of a robot that saw nothing: no world to judge a merge on
+    lines = OREBRO.read_text().splitlines()
+    flaser = [ln for ln in lines if ln.startswith("FLASER")][:40]
+    blind = []
+    for ln in flaser:
+        f = ln.split()
+        n = int(f[1])
+        blind.append(" ".join([f[0], f[1]] + ["0"] * n + f[2 + n:]))
+    (tmp_path / "blind").mkdir()
+    (tmp_path / "blind" / "blind.log").write_text("\n".join(blind) + "\n")
+    none, why = find_logs([tmp_path / "blind"])
+    assert none == [] and why[0][0] == "blind" and "occupied cells" in why[0][1], why
     # named on its own, the same file is bad input
     with pytest.raises(InputError, match="notes.log: no FLASER or ROBOTLASER1"):
         find_logs([tmp_path, tmp_path / "notes.log"])
@@ -113,6 +129,10 @@ def _bad(tmp: Path, kind: str) -> list:
     if kind == "one bad of two":
         (tmp / "bad.log").write_text("this is not a laser log\n")
         return ["--logs", str(OREBRO), str(tmp / "bad.log"), "--cases", "0"]
+    if kind == "maps after --logs":
+        return ["--logs", str(OREBRO), str(REPO / "maps"), "--cases", "1"]
+    if kind == "maps with no case":
+        return [str(REPO / "maps"), "--logs", str(OREBRO), "--cases", "0"]
     if kind == "fifo":
         os.mkfifo(tmp / "fifo.log")
         return ["--logs", str(tmp / "fifo.log")]
@@ -125,6 +145,8 @@ def _bad(tmp: Path, kind: str) -> list:
     ("not a log", "bad.log: no FLASER or ROBOTLASER1 records"),
     ("fifo", "fifo.log: is not a regular file"),
     ("one bad of two", "bad.log: no FLASER or ROBOTLASER1 records"),
+    ("maps after --logs", "a folder of maps given among --logs; give the folders of maps before"),
+    ("maps with no case", "--cases 0 draws no case from the maps"),
     ("no case", "--cases 0 leaves no case to run"),
 ])
 def test_bad_log_arguments_get_one_line_and_exit_2(tmp_path, capsys, kind, says):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import os
+import zlib
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -66,7 +67,7 @@ def load_log(spec: WorldSpec):
     return given if given is not None else _load_log(spec.log)
 
 
-@lru_cache(maxsize=8)
+@lru_cache(maxsize=64)
 def _load_log(path: str):
     from ..io_carmen import read_carmen
     return read_carmen(path).scans
@@ -159,7 +160,9 @@ def find_logs(paths: Sequence[str | os.PathLike], taken: Sequence[str] = ()) -> 
     too) is taken once. Returns ``(worlds, skipped)`` as :func:`find_worlds` does: a
     :class:`WorldSpec` per readable log, named as ``fusionkit import carmen`` names it
     (``intel.gfs.log`` -> ``intel``; ``intel (log)`` when a world of ``taken`` or another log
-    has that name), and ``(name, reason)`` for the logs of a folder that cannot be used.
+    has that name), and ``(name, reason)`` for the logs of a folder that cannot be used (not a
+    CARMEN log, fewer than 20 scans, or a map of the whole log that would not do as a world of
+    :func:`find_worlds`).
 
     Raises
     ------
@@ -167,7 +170,6 @@ def find_logs(paths: Sequence[str | os.PathLike], taken: Sequence[str] = ()) -> 
         A path that does not exist or is no file nor folder, a folder without a ``*.log``
         file, or a log named on its own that cannot be used (one line naming it).
     """
-    from ..io_carmen import default_name
     files = []
     for p in map(Path, paths):
         if p.is_dir():
@@ -188,7 +190,7 @@ def find_logs(paths: Sequence[str | os.PathLike], taken: Sequence[str] = ()) -> 
         unique[os.path.realpath(f)] = (first, was or named)
     worlds, skipped, seen = [], [], set(taken)
     for f, named in unique.values():
-        name = base = default_name(f)
+        name = base = f.name.split(".")[0] or f.name
         n = 1
         while name in seen:
             name = f"{base} (log)" if n == 1 else f"{base} (log {n})"
@@ -196,7 +198,9 @@ def find_logs(paths: Sequence[str | os.PathLike], taken: Sequence[str] = ()) -> 
         spec = WorldSpec(name, log=str(f))
         try:
             scans = load_log(spec)
-            why = "" if scans.n_scans >= 20 else f"only {scans.n_scans} scans, needs 20"
+            # the map of the whole log is the world: as usable as a world of maps must be
+            why = (f"only {scans.n_scans} scans, needs 20" if scans.n_scans < 20
+                   else _usable(load_world(spec)))
         except FusionkitError as exc:
             why = str(exc)
         if why and named:
@@ -254,19 +258,22 @@ def plan_cases(worlds: Sequence[WorldSpec], config: BenchConfig) -> list[CaseSpe
     """The suite: ``config.cases`` cases of the maps, case ``i`` taking map world ``i mod W``,
     mode ``(i // W) mod M`` and K ``(i + i // (W M)) mod R`` (so every world meets every mode
     and K as the suite grows); then every log world split into each K of ``config.robots``, one
-    case each (mode ``log``). Each case's seed is drawn from the suite's seed and its index."""
+    case each (mode ``log``). A map case's seed is drawn from the suite's seed and its index, a
+    log case's from the suite's seed, the log's name and K."""
     maps = [w for w in worlds if w.log is None]
     logs = [w for w in worlds if w.log is not None]
     W, M, R = len(maps), len(config.modes), len(config.robots)
     todo = [(maps[i % W], config.modes[(i // W) % M], config.robots[(i + i // (W * M)) % R])
             for i in range(config.cases if maps else 0)]
-    todo += [(w, "log", k) for w in logs for k in config.robots]
+    # a log case's seed is drawn from the log's name and K: the same whatever else the suite holds
+    todo = [(w, m, k, (config.seed, i)) for i, (w, m, k) in enumerate(todo)]
+    todo += [(w, "log", k, (config.seed, zlib.crc32(w.name.encode()), k, 1))
+             for w in logs for k in config.robots]
     if not todo:
         raise InputError("no case to run: give --cases 1 or more with a world to draw them from, "
                          "or logs to split (--logs)")
-    return [CaseSpec(i, w, mode, k, int(np.random.SeedSequence([config.seed, i]).generate_state(1)[0]
-                                        % 2**31))
-            for i, (w, mode, k) in enumerate(todo)]
+    return [CaseSpec(i, w, mode, k, int(np.random.SeedSequence(list(key)).generate_state(1)[0] % 2**31))
+            for i, (w, mode, k, key) in enumerate(todo)]
 
 
 def _overlaps(masks: list) -> np.ndarray:

@@ -139,7 +139,7 @@ def format_markdown(result: BenchResult, summary: dict | None = None) -> str:
     if result.command:
         lines += ["Command:", "", "```", result.command, "```", ""]
     if result.skipped:
-        lines += ["Maps not used: " + "; ".join(f"{n} ({w})" for n, w in result.skipped) + ".", ""]
+        lines += ["Maps and logs not used: " + "; ".join(f"{n} ({w})" for n, w in result.skipped) + ".", ""]
     lines += [
         f"A pair is a non-reference map of a case. Success: merged with rotation error < "
         f"{cfg.max_rotation_deg:g} deg and its known-cell centroid < {cfg.max_cells:g} cells from "
@@ -194,7 +194,9 @@ _PIXELS = 560
 def _pooled(img: np.ndarray, pixels: int) -> np.ndarray:
     """``img`` (labels ranked so that the higher one should show) shrunk to at most ``pixels``
     across by keeping each block's highest label: walls one cell wide stay in the picture of a
-    floor of thousands of cells, where drawing every ``k``-th cell drops most of them."""
+    floor of thousands of cells, where drawing every ``k``-th cell drops most of them. A block
+    holding walls on the truth and off it shows them on it: a map a cell or two off looks
+    right at this scale (the tables give its error)."""
     k = -(-max(img.shape) // pixels)
     if k <= 1:
         return img

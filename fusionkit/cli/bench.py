@@ -39,7 +39,9 @@ def register(sub) -> None:
                         "log split into K sessions for every K of --robots (one case each, beside "
                         "the --cases drawn from the maps), the sessions' maps with their recorded "
                         "scans, as 'fusionkit import carmen --split K' writes them; the truth is "
-                        "the log's corrected poses. With --cases 0, the logs alone")
+                        "the log's poses, so give SLAM-corrected logs (such as the *.gfs.log of "
+                        "Radish). The options of explore and crop cases do not apply to them. With "
+                        "--cases 0, the logs alone. Give folders of maps before --logs")
     p.add_argument("--methods", nargs="+", choices=METHODS, default=list(DEFAULT_METHODS), metavar="M",
                    help=f"methods to compare (default: {' '.join(DEFAULT_METHODS)}"
                         f"{''.join(f'; also {m}' for m in METHODS if m not in DEFAULT_METHODS)})")
@@ -114,6 +116,13 @@ def run(args) -> int:
     if args.cases == 0 and not args.logs:
         raise InputError("--cases 0 leaves no case to run: give --cases 1 or more, or logs to split "
                          "(--logs)")
+    if args.cases == 0 and (args.folders or args.worlds):
+        raise InputError("--cases 0 draws no case from the maps: leave out the folders of maps and "
+                         "--worlds, or give --cases 1 or more")
+    for p in map(Path, args.logs):
+        if p.is_dir() and not any(p.glob("*.log")) and any(p.glob("*.yaml")):
+            raise InputError(f"{p}: a folder of maps given among --logs; give the folders of maps "
+                             f"before --logs")
     use_maps = args.cases > 0
     worlds, skipped = find_worlds(folders, builtin) if use_maps else ([], [])
     logs, more = find_logs(args.logs, taken=[w.name for w in worlds])
