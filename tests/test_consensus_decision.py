@@ -181,11 +181,7 @@ def test_an_ambiguous_map_lists_its_rival_placements():
     from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
     spec = CaseSpec(0, WorldSpec("warehouse", builtin="warehouse"), "crop", 2, 180735306)
     case = make_case(spec, BenchConfig())
-    # (without the turns of the best placements: turned and refined again, the nearest rival
-    # settles within ``distinct_cells`` of the best one and the pair is refused as sliding,
-    # listing no rival; see test_robust)
-    cfg = ConsensusConfig(turns=0)
-    result = merge(list(case.grids), config=MergeConfig(method="consensus", consensus=cfg))
+    result = merge(list(case.grids), config=MergeConfig(method="consensus"))
     p = result.placements[1]
     assert not p.merged and "ambiguous" in p.reason and len(p.rivals) >= 2
     entry = result.report()["maps"][1]
@@ -195,7 +191,7 @@ def test_an_ambiguous_map_lists_its_rival_placements():
     assert min(t.error_to(truth)[0] for t, _ in p.rivals) < 3 * case.grids[0].resolution
     # the racks all run one way: every option is flagged as sliding, so no loop through a
     # third map may place one of them
-    est = estimate_pair(*case.grids, config=cfg)
+    est = estimate_pair(*case.grids)
     pair = est.diagnostics["pair"]
     assert pair.ambiguous and len(pair.diagnostics["sliding"]) == len(pair.plausible) >= 2
     assert all(pair.diagnostics["sliding"])
@@ -207,8 +203,8 @@ def test_an_ambiguous_map_lists_its_rival_placements():
 
 
 def test_a_wrong_placement_far_beyond_chance_but_visibly_worse_is_no_rival():
-    """Two windows of the warehouse where the truth meets every wall (10^-18); a placement 25 m
-    away meets 83 % of its walls and is 10 decades beyond chance too, but meets them
+    """Two windows of the warehouse where the truth meets every wall (10^-23); a placement 25 m
+    away meets 83 % of its walls and is 14 decades beyond chance too, but meets them
     significantly less often: it is no rival, and the pair is merged at the truth. One 20 m
     away meets two thirds of its many walls: by its share alone it would be within two decades
     of the truth, but fewer than twice as many of its walls meet as miss, and it is no
@@ -224,9 +220,9 @@ def test_a_wrong_placement_far_beyond_chance_but_visibly_worse_is_no_rival():
     d, r = est.transform.error_to(truth)
     assert d < 3 * case.grids[0].resolution and r < math.radians(2.0)
     best = pr.best
-    assert best.check.score > 0.99 and best.nfa < 1e-17
+    assert best.check.score > 0.99 and best.nfa < 1e-20
     far = [c for c in pr.refined[1:] if c.transform.error_to(best.transform)[0] > 10.0]
-    sure = [c for c in far if c.nfa < 1e-10 and c.check.score < 0.9]
+    sure = [c for c in far if c.nfa < 1e-14 and c.check.score < 0.9]
     assert sure, [(c.nfa, c.check.score) for c in pr.refined]
     weak = [c for c in far if c.check.score < 0.7 and c.check.evidence() > 500]
     assert weak and all(c.nfa > 1.0 for c in weak), [(c.nfa, c.check.score) for c in pr.refined]
@@ -545,9 +541,7 @@ def test_the_wider_search_of_a_map_left_out_does_not_merge_two_buildings():
     rotation with three times the starts, finds a better wrong placement, one that the first
     search's calibration would take (10^-2.9 false alarms: 10^-4.6 by the model, no rival, its
     meeting walls running both ways). Its placements are counted with ``fallback_calibration``
-    more decades, and the map stays out. (With the best placements turned and refined again,
-    ``turns``, the wider search's best wrong placement draws other wrong placements about it
-    and reaches only 10^-0.6; the calibration's part is shown with the turns off.)"""
+    more decades, and the map stays out."""
     from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
 
     def window(name, n, seed):
@@ -556,13 +550,12 @@ def test_the_wider_search_of_a_map_left_out_does_not_merge_two_buildings():
                          BenchConfig(methods=("consensus",), modes=("crop",), robots=(2,), cases=1, seed=1))
     house, arena = window("uh_robot_house", 3, 160753050), window("robocup17_nagoya_gmapping", 4, 792364855)
     maps = [house.grids[0], arena.grids[1]]
-    for cfg in (ConsensusConfig(), ConsensusConfig(turns=0)):
-        shipped = merge(maps, config=MergeConfig(method="consensus", seed=8178, consensus=cfg))
-        p = shipped.placements[1]
-        assert not p.merged and "not distinguishable from chance" in p.reason
+    shipped = merge(maps, config=MergeConfig(method="consensus", seed=8178))
+    p = shipped.placements[1]
+    assert not p.merged and "not distinguishable from chance" in p.reason
     # judged with the first search's calibration alone, the same search merges it
     loose = merge(maps, config=MergeConfig(method="consensus", seed=8178,
-                                           consensus=ConsensusConfig(turns=0, fallback_calibration=0.0)))
+                                           consensus=ConsensusConfig(fallback_calibration=0.0)))
     assert loose.placements[1].merged
     with pytest.raises(InputError, match="fallback_calibration"):
         ConsensusConfig(fallback_calibration=-1.0)
@@ -572,19 +565,15 @@ def test_the_wider_search_does_not_lay_an_office_window_in_the_warehouse():
     """A window of the office (identical rooms) against an exploration of the warehouse (rack
     rows): two buildings. The first search refuses the pair (10^-0.3 by the model); the wider
     search finds a placement at 10^-9.1 by the model with 5 m of meeting walls across, which
-    ``fallback_calibration`` = 2 decades took. With the shipped 6.5 the map stays out. (With the
-    best placements turned and refined again, ``turns``, it reaches only 10^3.5 and is refused
-    at any calibration; the calibration's part is shown with the turns off.)"""
+    ``fallback_calibration`` = 2 decades took. With the shipped 6.5 the map stays out."""
     office = _builtin_case(8, "office", "crop", 5, 1985194319)
     warehouse = _builtin_case(8, "warehouse", "explore", 2, 1504825736)
     maps, scans = [office.grids[0], warehouse.grids[1]], [office.scans[0], warehouse.scans[1]]
-    for cfg in (ConsensusConfig(), ConsensusConfig(turns=0)):
-        shipped = merge(maps, scans=scans, config=MergeConfig(method="consensus", seed=7548,
-                                                              consensus=cfg))
-        assert not shipped.placements[1].merged, shipped.placements[1]
+    shipped = merge(maps, scans=scans, config=MergeConfig(method="consensus", seed=7548))
+    assert not shipped.placements[1].merged, shipped.placements[1]
     loose = merge(maps, scans=scans,
                   config=MergeConfig(method="consensus", seed=7548,
-                                     consensus=ConsensusConfig(turns=0, fallback_calibration=2.0)))
+                                     consensus=ConsensusConfig(fallback_calibration=2.0)))
     assert loose.placements[1].merged
 
 

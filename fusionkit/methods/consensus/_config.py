@@ -127,9 +127,10 @@ class ConsensusConfig:
     pso_top : int
         See ``pso_refine``.
     turns, turn_step : int, float
-        The best placement, and each candidate that could rival it, is turned about the moving
-        map's walls by ``turn_step`` degrees up to ``turns`` times either way and refined again
-        (ICP can settle a degree off on cluttered maps); a better fit replaces it. 0 turns: off.
+        The best placement, and each candidate among the first ``pso_top`` that could rival it,
+        turned about the moving map's walls by ``turn_step`` degrees up to ``turns`` times either
+        way, are more starts of the search, refined and kept as its own are (ICP can settle a
+        degree off on cluttered maps): they add candidates and take none away. 0 turns: off.
     polish : bool
         After the test, refine the placements handed on (the best and each plausible one) with
         walls paired from the points themselves (:mod:`._polish`): the search's pairing is a

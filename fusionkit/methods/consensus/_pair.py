@@ -291,21 +291,16 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     if cfg.turns and best.rank > 0:
         # ICP settles where its pairs balance, which on a cluttered map can be a degree off the
         # placement that meets the most walls (an office window: 1.1 degrees off, 56 of its
-        # walls on open floor against 3 at the truth): turn the best placement, and each
-        # candidate that could rival it, about B's walls a few steps either way and refine
-        # again; what fits better replaces it
+        # walls on open floor against 3 at the truth): the best placement, and each candidate
+        # that could rival it, turned about B's walls a few steps either way, are more starts,
+        # refined as the search's own. They add candidates and take none away, so a rival found
+        # stays one
         centre = thin.mean(axis=0)
-        for k, c in enumerate(refined[:cfg.pso_top]):
-            if k and not close(c):
-                continue
+        for c in [c for k, c in enumerate(refined[:cfg.pso_top]) if k == 0 or close(c)]:
             px, py = c.transform(centre)
             for d in (sign * n * cfg.turn_step for n in range(1, cfg.turns + 1) for sign in (-1, 1)):
-                start = Transform2D(px, py, math.radians(d)) @ Transform2D(-px, -py, 0.0) @ c.transform
-                t = refine_memo(memo, a, thin_cells, thin_name, start, DEFAULT_GATES[:-2])
-                t = refine_memo(memo, a, refine_cells, refine_name, t, DEFAULT_GATES[-2:])
-                chk = verify_memo(memo, a, b, t)
-                if chk.evidence() > refined[k].rank and not _side_by_side(chk):
-                    refined[k] = Candidate(t, chk, c.source)
+                refine(Transform2D(px, py, math.radians(d)) @ Transform2D(-px, -py, 0.0) @ c.transform,
+                       c.source)
         refined.sort(key=_order)
         best = refined[0]
     if cfg.pso_refine and best.rank > 0 and any(close(c) for c in refined[1:cfg.pso_top]):
