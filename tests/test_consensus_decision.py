@@ -747,8 +747,9 @@ def test_a_placement_icp_settles_a_degree_off_is_turned_and_refined():
     settles, after ICP, 1.1 degrees and 4.0 cells off the truth, where the pairs ICP makes
     balance: 607 wall cells meet and 56 fall on open floor, enough for the test to take it
     (10^-4.0), a wrong merge. Turned a degree either way about B's walls and refined again it
-    settles on the truth (765 meet, 3 on open floor), which then replaces it: placed within a
-    cell, and far surer. Without the turns (``turns=0``) the wrong placement stays."""
+    settles on the truth (765 meet, 3 on open floor), a new candidate that is then the best:
+    placed within a cell, and far surer. Without the turns (``turns=0``) the wrong placement
+    stays."""
     from fusionkit.bench import BenchConfig, CaseSpec, WorldSpec, make_case
     world = WorldSpec("ipa_office_stuttgart",
                       path=str(REPO.parent / "shared" / "maps" / "real" / "ipa_office_stuttgart.yaml"))
