@@ -28,8 +28,8 @@ from .transform import Transform2D
 
 __all__ = [
     "CarmenConfig", "CarmenStats", "CarmenLog", "ImportedMap", "CarmenImport", "read_carmen",
-    "flaser_geometry", "to_own_frame", "split_sessions", "path_length", "write_robot_files",
-    "import_carmen",
+    "flaser_geometry", "to_own_frame", "split_sessions", "session_maps", "path_length",
+    "write_robot_files", "import_carmen", "SPLIT_OVERLAP", "RESOLUTION", "NO_RETURN_FREE",
 ]
 
 ProgressFn = Callable[[int, int, str], None]
@@ -122,6 +122,20 @@ def path_length(poses) -> float:
     if len(p) < 2:
         return 0.0
     return float(np.hypot(*np.diff(p[:, :2], axis=0).T).sum())
+
+
+#: Defaults of an import: the share of a session's length the next one shares, the cell size
+#: (m), and how far (m) a beam without a return clears free space
+SPLIT_OVERLAP, RESOLUTION, NO_RETURN_FREE = 0.3, 0.05, 0.0
+
+
+def session_maps(log: ScanLog, k: int, overlap: float, mcfg: MappingConfig):
+    """The ``k`` sessions of ``log`` (:func:`split_sessions`), each in the frame of its first
+    pose and mapped: ``(name, own scans, grid, own frame -> log frame)`` per session, in order
+    (``robot_1`` ... ``robot_k``)."""
+    for i, (a, b) in enumerate(split_sessions(log.n_scans, k, overlap)):
+        own, t = to_own_frame(log.subset(slice(a, b)))
+        yield f"robot_{i + 1}", own, build_grid(own, mcfg, name=f"robot_{i + 1}"), t
 
 
 def split_sessions(n_scans: int, k: int, overlap: float) -> tuple[tuple[int, int], ...]:
@@ -219,7 +233,8 @@ def check_name(name: str) -> str:
 
 
 def import_carmen(path, out_dir, *, name: str | None = None, split: int | None = None,
-                  overlap: float = 0.3, resolution: float = 0.05, no_return_free: float = 0.0,
+                  overlap: float = SPLIT_OVERLAP, resolution: float = RESOLUTION,
+                  no_return_free: float = NO_RETURN_FREE,
                   config: CarmenConfig = CarmenConfig(), overwrite: bool = False,
                   progress: ProgressFn | None = None) -> CarmenImport:
     """Convert a CARMEN log into fusionkit robot logs and maps.
@@ -294,11 +309,10 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
     total = split + 1
     world_grid = build_grid(log, mcfg, name="world")
     built = []
-    for i, ((a, b), nm) in enumerate(zip(sessions, names)):
-        own, t = to_own_frame(log.subset(slice(a, b)))
-        built.append((nm, own, build_grid(own, mcfg, name=nm), t))
+    for i, session in enumerate(session_maps(log, split, overlap, mcfg)):
+        built.append(session)
         if progress:
-            progress(i + 1, total, nm)
+            progress(i + 1, total, session[0])
 
     from .mapio import encode_map
 

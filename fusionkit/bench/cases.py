@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import FusionkitError, InputError
 from ..grid import OCCUPIED, OccupancyGrid
+from ..io_carmen import NO_RETURN_FREE, RESOLUTION, SPLIT_OVERLAP
 from ..resample import canvas_for, resample
 from ..transform import Transform2D
 from .config import MIN_MAP_WALLS, MIN_WORLD_OCCUPIED, BenchConfig
@@ -27,7 +28,7 @@ __all__ = ["WorldSpec", "CaseSpec", "Case", "find_worlds", "find_logs", "plan_ca
 #: How a log is cut into sessions and mapped (``fusionkit import carmen --split K``'s defaults):
 #: consecutive sessions share this fraction of their length; cells of this size (m); a beam
 #: without a return clears nothing
-LOG_SPLIT = {"overlap": 0.3, "resolution": 0.05, "no_return_free": 0.0}
+LOG_SPLIT = {"overlap": SPLIT_OVERLAP, "resolution": RESOLUTION, "no_return_free": NO_RETURN_FREE}
 
 
 @dataclass(frozen=True)
@@ -73,11 +74,14 @@ def _load_log(path: str):
     return read_carmen(path).scans
 
 
-def _log_grid(scans, name: str) -> OccupancyGrid:
+def _log_mapping():
     from ..io_carmen import mapping_config
+    return mapping_config(LOG_SPLIT["resolution"], LOG_SPLIT["no_return_free"])
+
+
+def _log_grid(scans, name: str) -> OccupancyGrid:
     from ..mapping import build_grid
-    return build_grid(scans, mapping_config(LOG_SPLIT["resolution"], LOG_SPLIT["no_return_free"]),
-                      name=name)
+    return build_grid(scans, _log_mapping(), name=name)
 
 
 @lru_cache(maxsize=32)
@@ -158,7 +162,7 @@ def find_logs(paths: Sequence[str | os.PathLike], taken: Sequence[str] = ()) -> 
     """The CARMEN logs among ``paths`` (files, or folders whose ``*.log`` files are taken,
     sorted), each read once to check it; a log given twice (by two paths, or in a folder given
     too) is taken once. Returns ``(worlds, skipped)`` as :func:`find_worlds` does: a
-    :class:`WorldSpec` per readable log, named as ``fusionkit import carmen`` names it
+    :class:`WorldSpec` per readable log, named by its file name up to the first dot
     (``intel.gfs.log`` -> ``intel``; ``intel (log)`` when a world of ``taken`` or another log
     has that name), and ``(name, reason)`` for the logs of a folder that cannot be used (not a
     CARMEN log, fewer than 20 scans, or a map of the whole log that would not do as a world of
@@ -263,10 +267,9 @@ def plan_cases(worlds: Sequence[WorldSpec], config: BenchConfig) -> list[CaseSpe
     maps = [w for w in worlds if w.log is None]
     logs = [w for w in worlds if w.log is not None]
     W, M, R = len(maps), len(config.modes), len(config.robots)
-    todo = [(maps[i % W], config.modes[(i // W) % M], config.robots[(i + i // (W * M)) % R])
-            for i in range(config.cases if maps else 0)]
+    todo = [(maps[i % W], config.modes[(i // W) % M], config.robots[(i + i // (W * M)) % R],
+             (config.seed, i)) for i in range(config.cases if maps else 0)]
     # a log case's seed is drawn from the log's name and K: the same whatever else the suite holds
-    todo = [(w, m, k, (config.seed, i)) for i, (w, m, k) in enumerate(todo)]
     todo += [(w, "log", k, (config.seed, zlib.crc32(w.name.encode()), k, 1))
              for w in logs for k in config.robots]
     if not todo:
@@ -419,19 +422,12 @@ def _log_case(spec: CaseSpec, world: OccupancyGrid, config: BenchConfig) -> Case
     """The log cut into K sessions, each mapped in its own start frame with its recorded scans,
     as ``fusionkit import carmen --split K`` writes them; the truth is where each session's
     first pose lies in the log's frame (the world's)."""
-    from ..io_carmen import split_sessions, to_own_frame
-    log = load_log(spec.world)
-    grids, scans, truth = [], [], []
-    for n, (a, b) in enumerate(split_sessions(log.n_scans, spec.robots, LOG_SPLIT["overlap"])):
-        own, t = to_own_frame(log.subset(slice(a, b)))
-        g = _log_grid(own, f"robot_{n + 1}")
-        grids.append(g)
-        scans.append(own)
-        truth.append(t)
+    from ..io_carmen import session_maps
+    _, scans, grids, truth = zip(*session_maps(load_log(spec.world), spec.robots,
+                                               LOG_SPLIT["overlap"], _log_mapping()))
     masks = [resample(g, t, world).known_mask() & world.known_mask() for g, t in zip(grids, truth)]
     ov = _overlaps(masks)
-    return Case(spec, world, tuple(grids), tuple(scans), tuple(truth), ov,
-                _linked(ov, config.min_overlap, grids))
+    return Case(spec, world, grids, scans, truth, ov, _linked(ov, config.min_overlap, grids))
 
 
 def make_case(spec: CaseSpec, config: BenchConfig) -> Case:

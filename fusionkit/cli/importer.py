@@ -7,7 +7,7 @@ import math
 import textwrap
 import time
 
-from ..io_carmen import CarmenConfig, import_carmen
+from ..io_carmen import NO_RETURN_FREE, RESOLUTION, SPLIT_OVERLAP, CarmenConfig, import_carmen
 from ..io_rosbag import PoseSource, import_rosbag
 from ._common import Progress, float_range, int_range
 
@@ -59,16 +59,16 @@ def register(sub) -> None:
     c.add_argument("--split", type=int_range(2, 100), metavar="K",
                    help="cut the log into K >= 2 overlapping sessions robot_1..robot_K "
                         "(default: no split, one map named after the log)")
-    c.add_argument("--overlap", type=float_range(0.0, 0.9), default=0.3, metavar="F",
+    c.add_argument("--overlap", type=float_range(0.0, 0.9), default=SPLIT_OVERLAP, metavar="F",
                    help="with --split: fraction of each session shared with the next, "
                         "0..0.9 (default: %(default)s)")
-    c.add_argument("--resolution", type=float_range(0.0, 10.0, lo_open=True), default=0.05,
+    c.add_argument("--resolution", type=float_range(0.0, 10.0, lo_open=True), default=RESOLUTION,
                    metavar="M", help=_RES_HELP)
     c.add_argument("--max-range", type=float_range(0.0, 1000.0, lo_open=True), metavar="M",
                    help="usable sensor range in metres: readings at or beyond it mean no return, "
                         "as does the scanner's no-return value found in the log (default: the "
                         "largest other reading, at most 40 m)")
-    c.add_argument("--no-return-free", type=float_range(0.0, 1000.0), default=0.0, metavar="M",
+    c.add_argument("--no-return-free", type=float_range(0.0, 1000.0), default=NO_RETURN_FREE, metavar="M",
                    help="distance in metres a no-return beam marks free space in the maps "
                         "(default: %(default)s: none, since a scanner also reports no return "
                         "when dazzled)")
