@@ -25,6 +25,7 @@ from typing import Callable
 import numpy as np
 
 from ._atomic import check_writable
+from ._guards import _write_error
 from .errors import InputError
 from .scanlog import ScanLog, load_scans
 
@@ -276,6 +277,8 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
         except sqlite3.Error as exc:  # the ROS 2 sqlite3 storage: "database or disk is full"
             raise InputError(f"{out}: the bag could not be written ({exc}); check the free disk "
                              f"space and the folder's permissions") from None
+        except OSError as exc:  # the ROS 1 and MCAP writers: said of the bag, not its temporary
+            raise _write_error(out, exc) from None
         if out.exists():
             raise InputError(f"{out} appeared while the bag was written; it was left as it was")
         if ros1:

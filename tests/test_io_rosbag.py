@@ -406,6 +406,35 @@ def test_cli_export_on_a_full_disk_is_one_line_and_leaves_nothing(run_dir, tmp_p
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("fmt, out", [("ros1", "b.bag"), ("ros2-mcap", "b")])
+def test_cli_export_on_a_full_disk_names_the_output_not_a_temporary(run_dir, tmp_path, capsys,
+                                                                    monkeypatch, fmt, out):
+    """The ROS 1 and MCAP writers report a full disk as an OS error on their temporary file:
+    the line named '.b.bag.4242.x1y2.tmp/b.bag', a file the user never asked for."""
+    import errno
+
+    import fusionkit.io_rosbag as io_rosbag
+    real = io_rosbag._MsgFactory.scan
+    calls = []
+
+    def full(self, *a, **k):
+        calls.append(1)
+        if len(calls) > 5:
+            raise OSError(errno.ENOSPC, "No space left on device",
+                          str(tmp_path / f".{out}.4242.x1y2.tmp" / out))
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(io_rosbag._MsgFactory, "scan", full)
+    args = ["export", "rosbag", str(run_dir), "--out", str(tmp_path / out)]
+    args += ["--format", "ros1"] if fmt == "ros1" else ["--storage", "mcap"]
+    assert _main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("fusionkit export rosbag: error: "), err
+    assert f"{tmp_path / out}:" in err[0] and ".tmp" not in err[0], err
+    assert "No space left" in err[0] and "free some disk space" in err[0], err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_file_of_random_bytes_is_refused_without_echoing_them(tmp_path):
     """The error line once held the 60 undecodable bytes of the file, escaped."""
     bag = tmp_path / "rnd.bag"
