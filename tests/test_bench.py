@@ -4,12 +4,14 @@ add up, the files are written, and a folder without a usable map is refused clea
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 
 from fusionkit.bench import (BenchConfig, WorldSpec, find_worlds, make_case, plan_cases, run_bench,
                              summarize, write_outputs)
+from fusionkit.bench.report import picture_title
 from fusionkit.cli import main
 from fusionkit.errors import InputError
 from fusionkit.grid import OccupancyGrid
@@ -91,6 +93,15 @@ def test_bench_runs_end_to_end_and_writes_its_files(tmp_path):
     assert len(doc["cases"]) == 2
     md = (tmp_path / "bench.md").read_text()
     assert "| consensus |" in md and "fusionkit bench --cases 2" in md and "By overlap" in md
+    # the picture numbers the case and its maps as bench.json does (they were one case index
+    # and map numbers counted from 1 side by side)
+    show = result.showcase["index"]
+    case = doc["cases"][show]
+    title = picture_title(result.showcase, "consensus", dict(case["methods"]["consensus"],
+                                                              world=case["world"]))
+    assert f"case {show} of bench.json ({case['world']}" in title
+    assert [int(m) for m in re.findall(r"map (\d+) (?:success|wrong|refused)", title)] == \
+        [e["map"] for e in case["methods"]["consensus"]["maps"]] == [1, 2]
 
 
 def test_results_do_not_depend_on_the_number_of_processes():

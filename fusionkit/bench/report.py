@@ -206,6 +206,15 @@ def _pooled(img: np.ndarray, pixels: int) -> np.ndarray:
     return pad.reshape(r // k, k, c // k, k).max(axis=(1, 3))
 
 
+def picture_title(showcase: dict, method: str, record: dict) -> str:
+    """A bench picture's title: the case and its maps numbered as in ``bench.json`` (the
+    case's ``index``, each map's ``map``; the reference is map 0)."""
+    st = [f"map {e['map']} {e['status']}" for e in record["maps"]]
+    return (f"{method}: case {showcase['index']} of bench.json ({record.get('world', '')}; the "
+            f"same case for every method)\n{', '.join(st)} (map 0 the reference)\nblack: walls "
+            f"on the truth, red: walls off the truth, blue: truth walls not mapped")
+
+
 def _render(showcase: dict, method: str, record: dict) -> bytes:
     """One picture of the showcase case for ``method``: its fused map placed in the world by
     the reference's true transform, over the world's walls."""
@@ -232,10 +241,7 @@ def _render(showcase: dict, method: str, record: dict) -> bytes:
     fig, ax = plt.subplots(figsize=(7, 7 * (r1 - r0) / max(c1 - c0, 1) + 0.8))
     ax.imshow(_pooled(img[r0:r1, c0:c1], _PIXELS), origin="lower", cmap=cmap, vmin=-0.5,
               vmax=5.5, interpolation="nearest")
-    st = [f"map {e['map'] + 1} {e['status']}" for e in record["maps"]]
-    ax.set_title(f"{method}: case {showcase['index']} ({record.get('world', '')}; the same case for "
-                 f"every method)\n{', '.join(st)}\nblack: walls on the truth, red: walls off "
-                 f"the truth, blue: truth walls not mapped", fontsize=9)
+    ax.set_title(picture_title(showcase, method, record), fontsize=9)
     ax.set_xticks([])
     ax.set_yticks([])
     fig.tight_layout()
