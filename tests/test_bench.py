@@ -207,3 +207,48 @@ def test_a_wall_one_cell_wide_stays_in_the_picture_of_a_large_floor():
     assert (out[:, :13] == 0).all() and (out[:, 14:] >= 2).all()
     small = img[:300, :400]
     assert _pooled(small, _PIXELS) is small           # a small map is drawn cell for cell
+
+
+def _map_with_image(folder, name: str, image: str) -> None:
+    """A ground-truth map ``NAME.yaml`` of the built-in cave whose image is ``image`` (PNG)."""
+    import cv2
+
+    from fusionkit.bench.cases import load_world
+    save_map(load_world(CAVE), folder / f"{name}.yaml")
+    pgm = folder / f"{name}.pgm"
+    cv2.imwrite(str(folder / image), cv2.imread(str(pgm), cv2.IMREAD_UNCHANGED))
+    pgm.unlink()
+    doc = (folder / f"{name}.yaml").read_text()
+    (folder / f"{name}.yaml").write_text(doc.replace(f"{name}.pgm", image))
+
+
+def test_an_output_that_is_an_input_is_refused_and_an_input_is_never_taken_for_a_stale_picture(
+        tmp_path, capsys):
+    """With --out the folder of the maps, a map whose image is named bench_consensus.png had it
+    replaced by the bench picture, and one named bench_walls.png had it deleted as the picture of
+    a method the run did not have; both with exit 0."""
+    import hashlib
+
+    def digest(p):
+        return hashlib.sha256(p.read_bytes()).hexdigest()
+
+    a = tmp_path / "a"
+    a.mkdir()
+    _map_with_image(a, "cave", "bench_consensus.png")
+    before = digest(a / "bench_consensus.png")
+    args = ["--cases", "1", "--modes", "crop", "--robots", "2", "--quiet", "--out"]
+    assert main(["bench", str(a), "--methods", "consensus", *args, str(a)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "would overwrite the input" in err[0] and "bench_consensus.png" in err[0], err
+    assert digest(a / "bench_consensus.png") == before
+    assert sorted(p.name for p in a.iterdir()) == ["bench_consensus.png", "cave.yaml"]
+
+    b = tmp_path / "b"
+    b.mkdir()
+    _map_with_image(b, "cave", "bench_walls.png")
+    before = digest(b / "bench_walls.png")
+    assert main(["bench", str(b), "--methods", "map-merge", *args, str(b)]) == 0
+    assert digest(b / "bench_walls.png") == before
+    assert {"bench.json", "bench.md", "bench_map-merge.png", "bench_walls.png", "cave.yaml"} == \
+        {p.name for p in b.iterdir()}
+

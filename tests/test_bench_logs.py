@@ -154,3 +154,16 @@ def test_bad_log_arguments_get_one_line_and_exit_2(tmp_path, capsys, kind, says)
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and says in err[0], err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_log_is_never_overwritten_by_the_bench_tables(tmp_path, capsys):
+    import shutil
+
+    log = tmp_path / "bench.md"
+    shutil.copy(OREBRO, log)
+    before = log.read_bytes()
+    assert main(["bench", "--logs", str(log), "--cases", "0", "--robots", "2", "--methods",
+                 "map-merge", "--quiet", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "would overwrite the input" in err[0], err
+    assert log.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["bench.md"]

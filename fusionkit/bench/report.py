@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import write_set
+from .._atomic import check_not_input, write_set
 from ..grid import OccupancyGrid
 from ..resample import resample
 from ..transform import Transform2D
@@ -251,11 +251,22 @@ def _render(showcase: dict, method: str, record: dict) -> bytes:
     return buf.getvalue()
 
 
-def write_outputs(result: BenchResult, out_dir: str | os.PathLike, summary: dict | None = None) -> list[Path]:
+def output_files(out_dir: str | os.PathLike, methods) -> list[Path]:
+    """The files :func:`write_outputs` writes into ``out_dir`` for ``methods``."""
+    out = Path(out_dir)
+    return [out / "bench.md", out / "bench.json"] + [out / f"bench_{m}.png" for m in methods]
+
+
+def write_outputs(result: BenchResult, out_dir: str | os.PathLike, summary: dict | None = None,
+                  inputs=()) -> list[Path]:
     """Write ``bench.md``, ``bench.json`` and ``bench_<method>.png`` into ``out_dir``, as one set
     (:func:`fusionkit._atomic.write_set`, ``bench.json`` written last): an interrupted write
     leaves the earlier run's files whole, never new tables beside old pictures. Pictures of
-    methods this run did not have are removed with it."""
+    methods this run did not have are removed with it, but never a file of ``inputs`` (the
+    maps, their images and the logs the bench read): one of those among the outputs is
+    refused (:class:`~fusionkit.errors.InputError`)."""
+    inputs = [Path(p) for p in inputs]
+    check_not_input(output_files(out_dir, result.config.methods), inputs)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     s = summary or summarize(result)
@@ -271,6 +282,16 @@ def write_outputs(result: BenchResult, out_dir: str | os.PathLike, summary: dict
            "seconds": round(result.seconds, 2), "summary": s, "cases": list(result.cases)}
     commit = (out / "bench.json", (json.dumps(doc, indent=1, default=_json_default) + "\n").encode("utf-8"))
     new = {p for p, _ in files}
-    stale = [p for p in sorted(out.glob("bench_*.png")) if p not in new and p.is_file()]
+    kept = {os.path.realpath(p) for p in inputs}
+    stale = [p for p in sorted(out.glob("bench_*.png"))
+             if p not in new and p.is_file() and not _is_input(p, kept, inputs)]
     write_set(files + [(p, None) for p in stale], commit)
     return [out / "bench.md", out / "bench.json"] + [p for p, _ in files if p.suffix == ".png"]
+
+
+def _is_input(path: Path, kept: set, inputs) -> bool:
+    """Whether ``path`` is one of ``inputs`` (``kept``, their real paths), by a link or a hard
+    link too."""
+    if os.path.realpath(path) in kept:
+        return True
+    return any(q.exists() and os.path.samefile(q, path) for q in inputs)

@@ -92,8 +92,10 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from .._atomic import check_not_input
     from ..bench import (BenchConfig, find_logs, find_worlds, format_table, run_bench, summarize,
                          write_outputs)
+    from ..bench.report import output_files
     from ..progress import ProgressBar
 
     folders = list(args.folders)
@@ -130,6 +132,10 @@ def run(args) -> int:
         raise InputError("no usable CARMEN log among --logs: " + "; ".join(f"{n}: {w}" for n, w in more))
     worlds += logs
     skipped += more
+    # every file the bench reads, used or not: no output may replace one, and no input is
+    # taken for the picture of a method this run does not have
+    inputs = _inputs(folders if use_maps else [], logs)
+    check_not_input(output_files(out, config.methods), inputs)
     progress = ProgressBar("bench", unit="cases", enabled=False if args.quiet else None)
     if not args.folders and use_maps and not args.quiet:
         # the default folders are relative to where the command runs: say what was found
@@ -146,7 +152,7 @@ def run(args) -> int:
                            progress=lambda done, total, label: progress(done, total, label))
         progress.close()
     summary = summarize(result)
-    paths = write_outputs(result, out, summary)
+    paths = write_outputs(result, out, summary, inputs=inputs)
     if not args.quiet:
         if skipped:
             print("not used: " + "; ".join(f"{n} ({w})" for n, w in skipped))
@@ -155,3 +161,12 @@ def run(args) -> int:
         print(format_table(result, summary))
         print("wrote " + ", ".join(str(p) for p in paths))
     return 0
+
+
+def _inputs(folders, logs) -> list[Path]:
+    """The files a bench reads: every map YAML of ``folders`` and the image it names, and the
+    logs (:class:`~fusionkit.bench.WorldSpec` of ``logs``)."""
+    from ..mapio import _protected
+
+    maps = [p for f in folders for p in sorted(Path(f).glob("*.yaml"))]
+    return _protected(maps) + [Path(w.log) for w in logs]
