@@ -38,7 +38,7 @@ from ._guards import (_check_target, _parent, _short, _write_error, check_distin
                       make_out_dir, made_out_dir, show)
 from .errors import InputError
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set",
+__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set", "recover_set", "hidden_copies",
            "check_not_input", "check_distinct", "check_writable", "check_out_dir", "make_out_dir", "made_out_dir",
            "describe_os_error", "show"]
 
@@ -117,21 +117,31 @@ def _sweep(targets: Iterable[Path]) -> None:
                         os.unlink(d / entry)
 
 
-def recover_set(commit: os.PathLike | str, leftovers) -> None:
+def recover_set(commit: os.PathLike | str, leftovers, targets: Iterable[os.PathLike | str] = ()) -> None:
     """Before a folder is judged by what it holds: finish or undo a write of the set whose
     commit file is ``commit`` that a kill cut short, and remove the temporary and backup files
-    of killed writes whose names match ``leftovers`` (a compiled pattern of file names).
-    Waits for a write in progress in that folder."""
+    of killed writes whose names match ``leftovers`` (a compiled pattern of file names) in the
+    folders of ``commit`` and of ``targets`` (the set's other files, which may stand in other
+    folders). Waits for a write in progress in those folders."""
     commit = Path(commit)
-    folder = _parent(commit)
-    if not folder.is_dir():
+    targets = [Path(t) for t in targets]
+    folders = [d for d in dict.fromkeys([_parent(commit)] + [_parent(t) for t in targets]) if d.is_dir()]
+    if not folders:
         return
-    with _locked([folder]):
-        _recover(commit)
-        for entry in os.listdir(folder):
-            if leftovers.fullmatch(entry) and not os.path.isdir(folder / entry):
-                with contextlib.suppress(OSError):
-                    os.unlink(folder / entry)
+    with _locked(folders):
+        _recover(commit, targets)
+        for folder in folders:
+            for entry in os.listdir(folder):
+                if leftovers.fullmatch(entry) and not os.path.isdir(folder / entry):
+                    with contextlib.suppress(OSError):
+                        os.unlink(folder / entry)
+
+
+def hidden_copies(names: str):
+    """The pattern of the temporary and backup files a killed write left of the files whose
+    names match the regular expression ``names`` (for :func:`recover_set`)."""
+    import re
+    return re.compile(r"\.(?:" + names + r")\.[0-9a-f]{12}\.(?:tmp|bak)")
 
 
 #: The commit file of every set this process wrote whole, in order (a command interrupted
@@ -324,14 +334,17 @@ def _commit(items, commit_path: Path, commit_payload: bytes, staged, hide, token
         raise
     # Committed: the new set is in place whatever happens now. A failure to tidy up is no
     # failure of the write: the next write to this output finds the journal, sees the commit
-    # file is the new one and finishes the tidying.
+    # file is the new one and finishes the tidying. So the backups go before the journal: a
+    # kill between the two leaves the journal, which names them.
     _fsync_dir(_parent(commit_path))
-    with contextlib.suppress(OSError):
-        journal.unlink(missing_ok=True)
     for _, backup, _ in entries:
         if backup is not None:
             with contextlib.suppress(OSError):
                 backup.unlink()
+    for d in dirs:
+        _fsync_dir(d)
+    with contextlib.suppress(OSError):
+        journal.unlink(missing_ok=True)
     _fsync_dir(_parent(journal))
     return True
 

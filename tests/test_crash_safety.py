@@ -626,3 +626,61 @@ def test_a_failure_after_the_commit_is_no_failure_of_the_write(tmp_path, monkeyp
     _write(tmp_path, OLD, "old")                                # the next write tidies up
     assert _state(tmp_path) == "old"
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+class _Killed(BaseException):
+    """A kill -9 played in the process: nothing after it runs, nothing is rolled back."""
+
+
+def test_a_write_killed_while_it_tidies_up_leaves_nothing_hidden_after_the_next(tmp_path, monkeypatch):
+    """Killed after the journal was dropped and before the backups were, a write left hidden
+    backups (full copies of the removed group map) that no later write removed."""
+    from fusionkit.mapio import group_map_files
+    out = tmp_path / "o"
+    out.mkdir()
+    save_maps([(OLD["merged"], out / "merged.yaml"), (OLD["merged.group1"], out / "merged.group1.yaml")],
+              (out / "merged.report.json", "{}"))
+    real = Path.unlink
+
+    def unlink(self, missing_ok=False):
+        if self.name.endswith(".bak"):
+            raise _Killed
+        return real(self, missing_ok=missing_ok)
+
+    monkeypatch.setattr(Path, "unlink", unlink)
+    with pytest.raises(_Killed):
+        save_maps([(NEW["merged"], out / "merged.yaml")], (out / "merged.report.json", "{}"),
+                  remove=group_map_files(out / "merged.yaml"))
+    monkeypatch.undo()
+    save_maps([(NEW["merged"], out / "merged.yaml")], (out / "merged.report.json", "{}"))
+    assert sorted(p.name for p in out.iterdir()) == ["merged.pgm", "merged.report.json", "merged.yaml"]
+
+
+def test_the_next_bench_after_one_killed_mid_commit_leaves_exactly_its_own_files(tmp_path, monkeypatch):
+    """The pictures to remove were listed from the names in view before the killed write was
+    undone: a picture it had hidden came back and stayed beside the new tables for good."""
+    from fusionkit.bench import BenchConfig, WorldSpec, run_bench, write_outputs
+    cave = WorldSpec("cave", builtin="cave")
+    first = run_bench([cave], BenchConfig(methods=("map-merge", "hough-spectrum"), modes=("crop",),
+                                          cases=1, robots=(2,), seed=3))
+    second = run_bench([cave], BenchConfig(methods=("map-merge",), modes=("crop",), cases=1,
+                                           robots=(2,), seed=4))
+    real = os.replace
+    for k in range(1, 7):
+        out = tmp_path / f"k{k}"
+        write_outputs(first, out)
+        calls = []
+
+        def killed(src, dst):
+            calls.append(dst)
+            if len(calls) == k:
+                raise _Killed
+            return real(src, dst)
+
+        monkeypatch.setattr(_atomic.os, "replace", killed)
+        monkeypatch.setattr(_atomic, "_rollback", lambda entries: False)  # killed: no undo
+        with pytest.raises(_Killed):
+            write_outputs(second, out)
+        monkeypatch.undo()
+        write_outputs(second, out)
+        assert sorted(p.name for p in out.iterdir()) == ["bench.json", "bench.md", "bench_map-merge.png"], k

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import check_not_input, write_set
+from .._atomic import check_not_input, hidden_copies, recover_set, write_set
 from ..grid import OccupancyGrid
 from ..resample import resample
 from ..transform import Transform2D
@@ -269,6 +269,9 @@ def write_outputs(result: BenchResult, out_dir: str | os.PathLike, summary: dict
     check_not_input(output_files(out_dir, result.config.methods), inputs)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    # a write here that a kill cut short is finished or undone first, so that the pictures it
+    # hid are in view when the stale ones are listed
+    recover_set(out / "bench.json", hidden_copies(r"bench_[^/]+\.png"))
     s = summary or summarize(result)
     files = []
     if result.showcase is not None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -125,11 +126,16 @@ def write_result(result, inputs, out, report_path, *, guard=None, output_name=No
     (``guard``, :meth:`OutputGuard.of` the inputs when not given). The report names the output
     ``output_name`` (default ``out``) and the inputs as given. Returns the group maps' paths.
     """
-    from ..mapio import group_map_files, map_digest, merge_reports, save_maps
+    from .._atomic import hidden_copies, recover_set
+    from ..mapio import GROUP_SUFFIX, group_map_files, map_digest, merge_reports, save_maps
     from ..pipeline import group_output_paths
 
     out = Path(out)
     guard = OutputGuard.of(inputs) if guard is None else guard
+    # a write to this output that a kill cut short is finished or undone first, so that the
+    # files it hid are in view when the stale ones are listed
+    recover_set(report_path, hidden_copies(re.escape(out.stem) + GROUP_SUFFIX + r"\.(yaml|yml|pgm|png)"),
+                [out])
     group_paths = group_output_paths(out, len(result.groups))
     group_files = group_paths + [q.with_suffix(".pgm") for q in group_paths]
     new = set(group_files)
