@@ -120,8 +120,7 @@ class DaskExecutor(Executor):
         self._shared = None
         self._shared_of = None
         if address is not None:
-            if not isinstance(address, str) or "://" not in address:
-                raise InputError(f"scheduler address {address!r}: give it as tcp://HOST:PORT")
+            _check_address(address)
             try:
                 self._client = Client(address, timeout=f"{float(timeout)}s", set_as_default=False)
             except (OSError, TimeoutError) as exc:
@@ -290,3 +289,28 @@ class DaskExecutor(Executor):
                     self._cluster = None
         finally:
             log.setLevel(level)
+
+
+#: The schemes a Dask scheduler listens on
+_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+
+
+def _check_address(address) -> None:
+    """Refuse a scheduler address Dask cannot connect to (the dashboard's ``http://HOST:8787``,
+    no host, a port out of range) with one line that says how to give it."""
+    from urllib.parse import urlsplit
+
+    fix = f"scheduler address {address!r}: give it as tcp://HOST:PORT"
+    if not isinstance(address, str) or "://" not in address:
+        raise InputError(fix)
+    try:
+        parts = urlsplit(address)
+        port = parts.port
+    except ValueError:
+        raise InputError(f"{fix} (the port is a number from 1 to 65535)") from None
+    if parts.scheme not in _SCHEMES:
+        hint = " (http is the dashboard's; the scheduler's own port is 8786 by default)" \
+            if parts.scheme in ("http", "https") else ""
+        raise InputError(f"{fix}{hint}")
+    if not parts.hostname or port == 0 or parts.path not in ("", "/"):
+        raise InputError(fix)

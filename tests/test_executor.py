@@ -252,6 +252,19 @@ def test_a_scheduler_that_does_not_answer_is_one_clear_error_line(tmp_path, caps
     assert not (tmp_path / "b" / "bench.json").exists()
     with pytest.raises(InputError, match="tcp://HOST:PORT"):
         make_executor(scheduler="127.0.0.1:1")
+
+
+@pytest.mark.parametrize("address", ["http://127.0.0.1:8787", "tcp://", "tcp://:8786",
+                                     "tcp://127.0.0.1:99999", "tcp://127.0.0.1:port"])
+def test_a_scheduler_address_dask_cannot_use_is_one_line_and_exit_2(tmp_path, capsys, address):
+    """The dashboard's http://HOST:8787, an easy slip, or tcp:// with no host gave two
+    tracebacks and exit 1."""
+    with deadline(60):
+        code = main(["bench", "--worlds", "cave", "--cases", "1", "--out", str(tmp_path / "b"),
+                     "--scheduler", address, "--scheduler-timeout", "2"])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "tcp://HOST:PORT" in err[0] and "Traceback" not in err[0], err
     with pytest.raises(InputError, match="back end"):
         make_executor("cluster")
 
