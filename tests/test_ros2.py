@@ -89,11 +89,31 @@ def test_a_half_given_initial_pose_skips_that_robot_not_the_node():
     ({"min_confidence": 1.5}, "parameter min_confidence: expected a number between 0 and 1"),
     ({"merged_map_topic": "bad topic"}, "parameter merged_map_topic: 'bad topic' is not a ROS 2 topic name"),
     ({"robot_map_topic": "9map"}, "parameter robot_map_topic: '9map' is not a ROS 2 topic name"),
+    # these passed the check, then overflowed a timer (a traceback at start, or a thread of a
+    # running node dead) or stopped every estimation
+    ({"discovery_rate": 1e-300}, "parameter discovery_rate: expected a rate in Hz"),
+    ({"merging_rate": 1e-11}, "parameter merging_rate: expected a rate in Hz"),
+    ({"estimation_rate": 1e-12}, "parameter estimation_rate: expected a rate in Hz"),
+    ({"seed": 99999999999999999999}, "parameter seed: expected a whole number from 0 to 2^63 - 1"),
+    ({"max_map_cells": 2 ** 70}, "parameter max_map_cells: expected a whole number from 0 to 2^63 - 1"),
+    # a robot no topic can name: the node waited for it for ever
+    ({"reference_robot": "///"}, "parameter reference_robot: give a robot's namespace such as /robot_1"),
 ])
 def test_bad_parameters_say_what_to_fix(values, message):
     with pytest.raises(fk.InputError) as info:
         settings_from(values)
     assert message in str(info.value)
+
+
+def test_the_estimation_rate_may_be_0_with_known_initial_poses_as_map_merge_configurations_give():
+    """map_merge's files for known initial poses set estimation_rate 0 (no estimation): it was
+    refused, though the node does not estimate then."""
+    s = settings_from({"known_init_poses": True, "estimation_rate": 0.0,
+                       "/r1/map_merge/init_pose_x": 0.0, "/r1/map_merge/init_pose_y": 0.0,
+                       "/r1/map_merge/init_pose_yaw": 0.0})
+    assert s.known_init_poses and s.estimation_rate == 0.0
+    with pytest.raises(fk.InputError, match="parameter estimation_rate: expected a rate in Hz"):
+        settings_from({"known_init_poses": False, "estimation_rate": 0.0})
 
 
 def test_initial_poses_are_not_read_unless_known_init_poses_is_set():

@@ -95,7 +95,14 @@ class NodeSettings:
         if self.max_map_cells < 1:
             raise InputError("parameter max_map_cells: must be >= 1")
         if self.reference_robot:
+            if not self.reference_robot.strip("/"):
+                raise InputError(f"parameter reference_robot: give a robot's namespace such as "
+                                 f"/robot_1, got {self.reference_robot!r}")
             object.__setattr__(self, "reference_robot", "/" + self.reference_robot.strip("/"))
+
+
+#: The least rate (Hz) of a timer of the node
+MIN_RATE = 1e-6
 
 
 def _coerce(name: str, value, kind: str):
@@ -113,14 +120,17 @@ def _coerce(name: str, value, kind: str):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f"parameter {name}: expected a number, got {value!r}")
     if kind == "count":
-        if float(value) != int(value) or value < 0:
-            raise InputError(f"parameter {name}: expected a whole number >= 0, got {value!r}")
+        if not math.isfinite(float(value)) or float(value) != int(value) or not 0 <= value <= 2**63 - 1:
+            raise InputError(f"parameter {name}: expected a whole number from 0 to 2^63 - 1, "
+                             f"got {value!r}")
         return int(value)
     v = float(value)
     if not math.isfinite(v):
         raise InputError(f"parameter {name}: expected a finite number, got {value!r}")
-    if kind == "rate" and not 0.0 < v <= 1000.0:
-        raise InputError(f"parameter {name}: expected a rate in Hz, > 0 and <= 1000, got {value!r}")
+    if kind == "rate" and not MIN_RATE <= v <= 1000.0:
+        # a rarer rate overflows the timers (about 11.6 days between two rounds at the least)
+        raise InputError(f"parameter {name}: expected a rate in Hz, from {MIN_RATE:g} to 1000, "
+                         f"got {value!r}")
     if kind == "unit" and not 0.0 <= v <= 1.0:
         raise InputError(f"parameter {name}: expected a number between 0 and 1, got {value!r}")
     return v
@@ -151,13 +161,22 @@ def init_poses_from(values: dict) -> tuple[dict, dict]:
 def settings_from(values: dict) -> NodeSettings:
     """Settings from parameter values (``name -> value``; missing names take their defaults)."""
     kw = {}
+    known = _coerce("known_init_poses", values.get("known_init_poses", False), "bool") \
+        if values.get("known_init_poses") is not None else False
     for name, (default, kind, _help) in PARAMETERS.items():
         if name in values and values[name] is not None:
+            if name == "estimation_rate" and known and _is_zero(values[name]):
+                kw[name] = 0.0   # as map_merge's files for known poses give it: no estimation
+                continue
             kw[name] = _coerce(name, values[name], kind)
     if kw.get("known_init_poses", PARAMETERS["known_init_poses"][0]):
         kw["init_poses"], kw["partial_init_poses"] = init_poses_from(values)
     # else, as map_merge, initial poses are not read (a half-given one is no error)
     return NodeSettings(**kw)
+
+
+def _is_zero(value) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and value == 0
 
 
 #: an initial pose written nested in a parameters file (``robot_3: map_merge: init_pose_x:``)
