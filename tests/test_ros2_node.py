@@ -323,6 +323,11 @@ def test_an_empty_first_map_is_not_the_reference_and_a_pending_switch_is_decided
     assert procs.stop("pub") == 0 and procs.stop("node") == 0
     log = procs.log("node")
     assert status["reference"] == "/robot_2"              # the first map with a known cell
+    if first == "unknown":  # while robot_1's map held no known cell, its reason was empty
+        early = [s["status"]["robots"]["/robot_1"] for s in _records(probe_out, "status")
+                 if s["status"]["robots"].get("/robot_1", {}).get("updates") == 1]
+        assert early and all("no known cell" in r["reason"] for r in early), \
+            [(r["last_decision"], r["reason"]) for r in early]
     # the wrong transform no longer fits robot_3's own map: it is not kept until a better one
     # is confirmed, the new estimate places robot_3 at once
     assert "/robot_3: placed" in log and "(anew, as its placement no longer fits" in log

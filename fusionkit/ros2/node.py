@@ -81,6 +81,7 @@ class MergeNode:
                                switch_confirmations=settings.switch_confirmations)
         self.estimations = 0
         self.last_estimation_s = None
+        self.estimate_error = ""   # why the last estimation failed (none: "")
         self.last_merge_s = None     # seconds to fuse and publish the last merged map
         self._map_version = 0       # bumped by every accepted map message
         self._held_version = 0      # bumped by every change of a held transform
@@ -298,12 +299,16 @@ class MergeNode:
             # a named reference robot not yet heard of (or without a wall): nothing is placed
             no_ref = (self.reference is not None and not self.s.known_init_poses
                       and (ref is None or not ref.walls))
+            failed = self.estimate_error
         for name, r in items:
             held = self.tracker.held(name)
             waiting = r.grid is None   # its place may be known (the reference), its map is not
             why = ("no valid map received yet" if waiting and not r.problem else
                    r.last_why or (f"waiting for the reference robot {self.reference}'s map with a "
-                                  f"wall" if no_ref and held is None else ""))
+                                  f"wall" if no_ref and held is None else
+                                  "its map holds no known cell yet" if not r.known else
+                                  f"the last estimation failed: {failed}" if failed and held is None
+                                  else ""))
             robots[name] = {
                 "topic": r.topic, "placed": held is not None and not waiting,
                 "transform": None if held is None else held[0].as_dict(4),
@@ -434,18 +439,13 @@ class MergeNode:
                                            cancel=self._stop.is_set)
             except MergeCancelled:
                 break
-            except FusionkitError as exc:
-                if not self._alive():
-                    break
-                self._once(("estimate", str(exc)), f"estimation failed: {exc}")
-                done = version
-                self._publish_status()
-                continue
             except Exception as exc:  # noqa: BLE001 - log once, go on
                 if not self._alive():
                     break
-                self._once(("estimate", type(exc).__name__),
-                           f"estimation failed: {type(exc).__name__}: {exc}", "error")
+                said = isinstance(exc, FusionkitError)   # bad input, said in its own words
+                self.estimate_error = str(exc) if said else f"{type(exc).__name__}: {exc}"
+                self._once(("estimate", str(exc) if said else type(exc).__name__),
+                           f"estimation failed: {self.estimate_error}", "warning" if said else "error")
                 done = version
                 self._publish_status()
                 continue
@@ -453,6 +453,7 @@ class MergeNode:
                 break
             self.last_estimation_s = round(time.perf_counter() - t0, 3)
             self.estimations += 1
+            self.estimate_error = ""
             done = version
             changed = False
             grids = dict(snapshot)
