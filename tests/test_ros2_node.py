@@ -569,3 +569,17 @@ def test_a_dropped_robot_leaves_no_transform_for_a_subscriber_that_comes_later(p
     assert procs.stop("late") == 0 and procs.stop("pub") == 0 and procs.stop("node") == 0
     log = procs.log("node")
     assert "/robot_2: dropped" in log and "Traceback" not in log and "ERROR" not in log
+
+
+def test_a_merged_map_topic_a_robot_publishes_on_is_said(procs, run3):
+    """merged_map_topic:=/robot_1/map was taken silently: robot_1 dropped from the merge, and
+    merged maps published among its own."""
+    procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
+                                      "-p", "merged_map_topic:=/robot_1/map"])
+    procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER, f"robot_1={run3 / 'robot_1.yaml'}@0",
+                        f"robot_2={run3 / 'robot_2.yaml'}@0"])
+    said = "/robot_1/map, the merged map's topic, has another publisher"
+    _wait(lambda: said in procs.log("node"), 60, procs, "the shared topic to be said")
+    assert procs.stop("pub") == 0 and procs.stop("node") == 0
+    log = procs.log("node")
+    assert log.count(said) == 1 and "choose another merged_map_topic" in log and "Traceback" not in log

@@ -9,8 +9,7 @@ Published, besides the merged map (``merged_map_topic``, frame ``world_frame``):
 
 * ``~/<robot>/transform`` (``geometry_msgs/msg/PoseStamped``, latched): where the robot's map
   frame lies in the merged frame, e.g. ``/map_merge/robot1/transform``;
-* ``~/status`` (``std_msgs/msg/String``, latched): JSON with every robot's state, transform
-  and confidence;
+* ``~/status`` (``std_msgs/msg/String``, latched): JSON of each robot's state and transform;
 * ``/tf_static`` (``world_frame`` -> ``<robot>/map``) when ``tf2_ros`` can be imported.
 """
 
@@ -165,6 +164,9 @@ class MergeNode:
     def _discover(self) -> None:
         s = self.s
         seen = set()
+        if self.node.count_publishers(self.merged_topic) > 1:   # a robot's map topic, say
+            self._once(("shared",), f"{self.merged_topic}, the merged map's topic, has another publisher: a "
+                                    f"robot's map there is not merged; choose another merged_map_topic")
         for topic, types in self.node.get_topic_names_and_types():
             if not is_robot_map_topic(topic, types, robot_map_topic=s.robot_map_topic,
                                       robot_namespace=s.robot_namespace,
