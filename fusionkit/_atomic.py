@@ -234,6 +234,7 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
         (or :class:`fusionkit._signals.Terminated`) when interrupted before the commit point:
         the old set is left whole.
     """
+    _signals.check()   # a Ctrl-C a library swallowed: the old set stays
     items = [(Path(p), b) for p, b in files]
     commit_path, commit_payload = Path(commit[0]), commit[1]
     targets = [p for p, _ in items] + [commit_path]
@@ -391,6 +392,7 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
     On any exception the temporary file is removed and ``target`` is left as it was; a
     temporary file that a killed process left for the same target is removed first.
     """
+    _signals.check()
     target = Path(target)
     _check_target(target)
     tmp = _parent(target) / f".{target.name}.{secrets.token_hex(6)}{_TMP}"

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterator
 
 __all__ = ["Terminated", "HungUp", "install", "deferred", "pending", "signal_of", "exit_status",
+           "check", "swallowed", "forget",
            "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_SIGHUP"]
 
 #: Exit statuses of a command stopped by SIGINT (Ctrl-C), SIGTERM and SIGHUP (a closed
@@ -31,6 +32,10 @@ EXIT_SIGHUP = 129
 _SIGNALS = (signal.SIGINT, signal.SIGTERM) + ((signal.SIGHUP,) if hasattr(signal, "SIGHUP") else ())
 _pending: list[int] = []
 _deferring = 0
+#: Signals whose exception was raised and has not reached the command's end: a library that
+#: swallowed it (an optional import that fails with ImportError while it loads) or turned it
+#: into another error lost the user's Ctrl-C (:func:`check`, :func:`swallowed`)
+_received: list[int] = []
 
 
 class Terminated(KeyboardInterrupt):
@@ -46,11 +51,37 @@ def _raise(signum, frame):  # noqa: ARG001 (signal handler signature)
     if _deferring:
         _pending.append(signum)
         return
+    _received.append(signum)
+    raise _exception(signum)
+
+
+def _exception(signum: int) -> KeyboardInterrupt:
     if signum == signal.SIGTERM:
-        raise Terminated()
+        return Terminated()
     if signum == getattr(signal, "SIGHUP", None):
-        raise HungUp()
-    raise KeyboardInterrupt()
+        return HungUp()
+    return KeyboardInterrupt()
+
+
+def swallowed() -> KeyboardInterrupt | None:
+    """The interrupt of a signal that arrived while :func:`install`'s handlers were in place and
+    that was never handled (:func:`forget`), or None."""
+    return _exception(_received[-1]) if _received else None
+
+
+def forget() -> None:
+    """The interrupts so far are handled (the command said so and ends, or a new one starts)."""
+    _received.clear()
+
+
+def check() -> None:
+    """Raise again an interrupt some library swallowed (see :data:`_received`): called before
+    outputs are written, so that a Ctrl-C that came while modules loaded is not lost and the
+    old outputs are not replaced."""
+    exc = swallowed()
+    if exc is not None and all(signal.getsignal(s) is _raise for s in _SIGNALS):
+        _received.clear()
+        raise exc
 
 
 def signal_of(exc: KeyboardInterrupt) -> int:
@@ -92,6 +123,7 @@ def install() -> None:
     """Turn SIGINT and SIGTERM into exceptions (main thread only; elsewhere a no-op)."""
     if threading.current_thread() is not threading.main_thread():
         return
+    forget()
     for s in _SIGNALS:
         signal.signal(s, _raise)
     if not getattr(sys.unraisablehook, "installed", False):

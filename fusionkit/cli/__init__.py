@@ -157,7 +157,9 @@ def _main(argv) -> int:
         # named as its parser names it in a usage error: "fusionkit import carmen"
         command = " ".join(["fusionkit", args.command] + [
             str(v) for v in (getattr(args, k, None) for k in ("kind", "ros2_command")) if v])
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        lost = _signals.swallowed()   # a Ctrl-C a library swallowed: said, not lost
+        return code if lost is None else _interrupted(command, argv, lost)
     except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM as _signals.Terminated
         return _interrupted(command, argv, exc)
     except SystemError as exc:
@@ -187,12 +189,20 @@ def _main(argv) -> int:
     except RecursionError:
         _say(f"{command}: error: an input is nested too deeply to read; check the files given")
         return 2
+    except Exception:
+        # an interrupt a library turned into its own error while it loaded (numba's "Error
+        # calling __set_name__", an ImportError) is the interrupt
+        lost = _signals.swallowed()
+        if lost is None:
+            raise
+        return _interrupted(command, argv, lost)
 
 
 def _interrupted(command: str, argv, exc: KeyboardInterrupt) -> int:
     """Say that ``command`` was stopped by SIGINT, SIGTERM or SIGHUP (``exc``) and what it
     left; its exit status."""
     _quiet_signals()
+    _signals.forget()
     if _command_of(sys.argv[1:] if argv is None else list(argv)) == "ros2":
         # the ROS 2 commands run until stopped and write nothing: stopped while they start
         # up, they end as they do once running, with exit 0
