@@ -280,7 +280,9 @@ def save_maps(maps, report=None, *, image_format: str = "pgm", inputs=(), remove
     else:
         commit = yamls[0]
         files += yamls[1:]
-    remove = [Path(p) for p in remove if p is not None and os.path.lexists(p)]
+    # a YAML to remove goes before its image, so that no YAML names a missing image mid-commit
+    remove = sorted((Path(p) for p in remove if p is not None and os.path.lexists(p)),
+                    key=lambda p: p.suffix.lower() not in _YAML_SUFFIXES)
     protected = _protected(inputs)
     check_not_input([y for y, _ in yamls] + [p for p, _ in files] + [commit[0]] + remove, protected)
     files += [(p, None) for p in remove]

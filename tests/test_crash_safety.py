@@ -727,3 +727,24 @@ def test_a_ctrl_c_a_library_swallows_while_modules_load_still_stops_the_command(
     assert code == 130
     assert capsys.readouterr().err == "fusionkit merge: interrupted; no output was left half-written\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.pgm", "a.yaml", "b.pgm", "b.yaml"]
+
+
+def test_a_group_map_a_merge_removes_never_names_a_missing_image_mid_commit(tmp_path, monkeypatch):
+    """Killed between the two, a commit that removed a group map had taken its image away while
+    its YAML still named it."""
+    from fusionkit.mapio import group_map_files
+    out = tmp_path / "o"
+    out.mkdir()
+    save_maps([(OLD["merged"], out / "merged.yaml"), (OLD["merged.group1"], out / "merged.group1.yaml")],
+              (out / "merged.report.json", "{}"))
+    real, seen = os.replace, []
+
+    def watched(src, dst):
+        real(src, dst)
+        seen.append(not (out / "merged.group1.yaml").exists() or (out / "merged.group1.pgm").exists())
+
+    monkeypatch.setattr(_atomic.os, "replace", watched)
+    save_maps([(NEW["merged"], out / "merged.yaml")], (out / "merged.report.json", "{}"),
+              remove=group_map_files(out / "merged.yaml"))
+    assert seen and all(seen), seen
+    assert sorted(p.name for p in out.iterdir()) == ["merged.pgm", "merged.report.json", "merged.yaml"]
