@@ -281,6 +281,7 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
             raise _write_error(out, exc) from None
         if out.exists():
             raise InputError(f"{out} appeared while the bag was written; it was left as it was")
+        _flush(tmp)   # on disk before it takes its name: a power cut leaves no truncated bag
         if ros1:
             os.link(tmp, out)  # fails rather than replace a file that appeared meanwhile
         else:
@@ -290,6 +291,18 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)
     return BagExport(out, fmt, "bag" if ros1 else storage, result[0], result[1], result[2])
+
+
+def _flush(bag: Path) -> None:
+    """``fsync`` the bag's files (a ROS 1 file, or a ROS 2 folder's) and the folders holding
+    them."""
+    files = [bag] if bag.is_file() else sorted(p for p in bag.rglob("*") if p.is_file())
+    for p in files + sorted({p.parent for p in files}):
+        fd = os.open(p, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 def _sweep_dead_exports(parent: Path, name: str) -> None:

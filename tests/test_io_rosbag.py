@@ -470,3 +470,37 @@ def test_an_export_into_a_folder_it_cannot_write_names_the_output_not_a_temporar
     assert main(["export", "rosbag", str(run_dir), "--out", "/proc/x_bag"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "/proc/x_bag:" in err and ".tmp" not in err, err
+
+
+@pytest.mark.parametrize("fmt, out", [("ros1", "b.bag"), ("ros2", "b")])
+def test_an_exported_bag_is_on_disk_before_it_takes_its_name(run_dir, tmp_path, monkeypatch, fmt, out):
+    """The bag was renamed into place unflushed: a power cut could leave a truncated bag under
+    the name asked for."""
+    import os
+
+    synced, named = set(), []
+    real_fsync, real_rename, real_link = os.fsync, os.rename, os.link
+
+    def fsync(fd):
+        synced.add(os.path.realpath(f"/proc/self/fd/{fd}"))
+        return real_fsync(fd)
+
+    def rename(src, dst, *a, **k):
+        named.append(set(synced))
+        return real_rename(src, dst, *a, **k)
+
+    def link(src, dst, *a, **k):
+        named.append(set(synced))
+        return real_link(src, dst, *a, **k)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "rename", rename)
+    monkeypatch.setattr(os, "link", link)
+    res = export_rosbag(run_dir, tmp_path / out, fmt=fmt)
+    monkeypatch.undo()
+    bag = tmp_path / out
+    files = [bag] if bag.is_file() else [p for p in bag.rglob("*") if p.is_file()]
+    assert named and files
+    # every file of the bag was flushed under its temporary name before the bag was named
+    assert {p.name for p in files} <= {Path(s).name for s in named[-1]}, (files, named[-1])
+    assert res.path == bag
