@@ -296,9 +296,9 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
         if group[k] is not None:
             root = min(m for m in range(n) if group[m] == group[k])
             others = len([m for m in range(n) if group[m] == group[k]]) - 1
-            reasons.append(f"no confident link joins it to the reference's maps; it is placed in "
-                           f"group {group[k]} with {others} other map(s), in the frame of map {root + 1} as "
-                           f"given")
+            reasons.append(f"no confident link joins it to the reference's maps; it is kept in "
+                           f"group {group[k]} with {others} other map(s), fused in the frame of map "
+                           f"{root + 1} as given")
         elif any(k in e for e in demoted if e not in edges):
             reasons.append("its structure repeats (it fits another map in several places) and no "
                            "loop through a third map confirms its one fit")

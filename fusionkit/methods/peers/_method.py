@@ -169,7 +169,7 @@ def _peer(method: str, grids, reference: int, seed: int, emit):
             tree = []
             for k in keep:
                 reasons[k] = (f"its largest group of confidently matched maps does not hold the "
-                              f"reference map; it is placed in group 1 with {len(keep) - 1} "
+                              f"reference map; it is kept in group 1 with {len(keep) - 1} "
                               f"other map{'s' if len(keep) > 2 else ''}")
         return transforms, conf, tree, reasons, {}, groups
     accepted = {}
