@@ -1,9 +1,9 @@
 """ROS bags in and out: LaserScan + poses to fusionkit robot logs, simulated runs to bags.
 
-Reading (:func:`read_rosbag`, :func:`import_rosbag`) takes a ROS 1 ``.bag`` file or a ROS 2
-bag directory (SQLite ``.db3`` or ``.mcap`` storage) through the pure-Python ``rosbags``
-library. Each ``sensor_msgs/LaserScan`` on the scan topic is paired with the sensor pose at its
-stamp, from either
+Reading (:func:`read_rosbag`, :func:`import_rosbag`) takes a ROS 1 ``.bag`` file or a ROS 2 bag
+directory (SQLite ``.db3`` or ``.mcap`` storage) through the pure-Python ``rosbags`` library. Each
+``sensor_msgs/LaserScan`` on the scan topic is paired with the sensor pose at its stamp, from
+either
 
 * a pose topic (``nav_msgs/Odometry``, ``geometry_msgs/PoseStamped`` or
   ``geometry_msgs/PoseWithCovarianceStamped``): the pose of the message's child frame in its
@@ -15,11 +15,11 @@ stamp, from either
   frame is not in the tree, the pose of the base frame.
 
 Poses are interpolated at the scan stamp between the two bracketing samples: ``x`` and ``y``
-linearly, the heading along the shorter arc. Scans outside the span of the pose samples are
-dropped and counted. Messages are sorted by their header stamps (a topic whose header stamps
-are all zero uses the times the bag recorded them). Readings that are NaN or below
-``range_min`` become ``inf`` (no return), as ``slam_gmapping`` treats them; they are counted.
-Only 2-D motion is kept: the heading is the yaw of each rotation.
+linearly, the heading along the shorter arc. Scans outside the span of the pose samples are dropped
+and counted. Messages are sorted by their header stamps (a topic whose header stamps are all zero
+uses the times the bag recorded them). Readings that are NaN or below ``range_min`` become ``inf``
+(no return), as ``slam_gmapping`` treats them; they are counted. Only 2-D motion is kept: the
+heading is the yaw of each rotation.
 
 Writing a simulated run as a bag is :mod:`fusionkit.rosbag_export` (:func:`export_rosbag`,
 re-exported here); the pose algebra and transform tree are :mod:`fusionkit.rosbag_frames`.
@@ -62,8 +62,7 @@ TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")
 TF_TOPICS = ("/tf", "/tf_static")
 
 
-# -- options and results ----------------------------------------------------------------------------
-
+# -- options and results ------------------------------------------------------------------------
 @dataclass(frozen=True)
 class PoseSource:
     """Where the scan poses come from: a pose topic, or the transform tree.
@@ -242,7 +241,8 @@ class _Bag:
             self.reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
             self.reader.open()
         except self.errors + (OSError, ValueError, KeyError) as exc:
-            raise InputError(f"{path}: not a readable ROS bag ({_msg(exc)})") from None
+            raise InputError(f"{path}: not a readable ROS bag ({_msg(exc)}); give a ROS 1 .bag "
+                             f"file or a ROS 2 bag's folder") from None
 
     def close(self):
         try:
@@ -265,9 +265,9 @@ class _Bag:
 
 
 def _msg(exc) -> str:
-    # a decode error's args hold the bytes it could not read: its own words say enough
-    text = (str(exc) if isinstance(exc, UnicodeError) or not exc.args
-            else " ".join(str(a) for a in exc.args))
+    if any(isinstance(e, UnicodeError) for e in (exc, exc.__context__)):  # a decoder's words
+        return "bytes where a ROS bag holds text"
+    text = str(exc) if not exc.args else " ".join(str(a) for a in exc.args)
     text = text.splitlines()[0] if text else type(exc).__name__
     return text if len(text) <= 200 else text[:200] + "..."
 

@@ -444,6 +444,8 @@ def test_a_file_of_random_bytes_is_refused_without_echoing_them(tmp_path):
                       poses=PoseSource(odom_topic="/odom"))
     assert "not a readable ROS bag" in str(info.value)
     assert "\\x" not in str(info.value) and len(str(info.value)) < 300
+    # said in words that tell what to give, not a decoder's ('utf-8' codec can't decode byte)
+    assert "codec" not in str(info.value) and "give a ROS 1 .bag" in str(info.value), str(info.value)
 
 
 def test_a_bag_imported_into_its_own_folder_can_be_imported_there_again(run_dir, tmp_path):
