@@ -30,8 +30,9 @@ class PlayRobot:
 
 
 def find_robots(run_dir) -> list[PlayRobot]:
-    """The robots of a run directory: those listed in its ``truth.json`` when it has one, else
-    every map with a ``.scans.npz`` beside it (a map alone is played whole).
+    """The robots of a run directory: those listed in its ``truth.json`` when it has one (one
+    without a ``.scans.npz`` is played as its whole map at once), else every map with a
+    ``.scans.npz`` beside it.
 
     Raises
     ------
