@@ -315,3 +315,22 @@ def test_play_finds_a_runs_robots_and_grows_their_maps(tmp_path):
     np.testing.assert_array_equal(steps[-1].data, fk.load_map(robots[0].map_path).data)
     with pytest.raises(fk.InputError, match="no robot map"):
         find_robots(tmp_path)
+
+
+def test_a_parameter_file_with_no_section_for_the_node_is_found(tmp_path):
+    """A file written for another node (or for the node before it was renamed) was taken
+    silently, none of its parameters applied."""
+    from fusionkit.ros2._runtime import unapplied_params_files
+    files = {"other": "other_node:\n  ros__parameters:\n    merging_rate: 2.0\n",
+             "mine": "map_merge:\n  ros__parameters:\n    merging_rate: 2.0\n",
+             "slash": "/map_merge:\n  ros__parameters:\n    merging_rate: 2.0\n",
+             "all": "/**:\n  ros__parameters:\n    use_sim_time: true\n",
+             "nested": "ns:\n  map_merge:\n    ros__parameters:\n      merging_rate: 2.0\n",
+             "deep": "/**/map_merge:\n  ros__parameters:\n    merging_rate: 2.0\n"}
+    paths = {}
+    for name, text in files.items():
+        paths[name] = tmp_path / f"{name}.yaml"
+        paths[name].write_text(text)
+    assert unapplied_params_files(list(paths.values()), "/map_merge") == \
+        [str(paths["other"]), str(paths["nested"])]
+    assert unapplied_params_files([paths["nested"], paths["deep"]], "/ns/map_merge") == []

@@ -32,7 +32,7 @@ def run_merge_node(ros_args=(), params_files=(), *, name: str = "map_merge") -> 
     InputError
         ROS 2 not installed, bad arguments, a parameter with a bad value.
     """
-    from ._runtime import ros_argv, ros_context
+    from ._runtime import ros_argv, ros_context, unapplied_params_files
     from .node import MergeNode, read_settings
 
     with ros_context(ros_argv("fusionkit-merge-node", ros_args, params_files)) as rclpy:
@@ -40,6 +40,10 @@ def run_merge_node(ros_args=(), params_files=(), *, name: str = "map_merge") -> 
 
         node = Node(name, allow_undeclared_parameters=True,
                     automatically_declare_parameters_from_overrides=True)
+        files = list(params_files) + [b for a, b in zip(ros_args, list(ros_args)[1:]) if a == "--params-file"]
+        for f in unapplied_params_files(files, node.get_fully_qualified_name()):
+            node.get_logger().warn(f"{f}: no section for this node ({node.get_fully_qualified_name()}:"
+                                   f" ros__parameters: ...); none of its parameters is applied")
         merger = None
         try:
             merger = MergeNode(node, read_settings(node))

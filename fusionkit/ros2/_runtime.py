@@ -122,3 +122,34 @@ def ros_context(argv):
         pass
     finally:
         rclpy.try_shutdown()
+
+
+def unapplied_params_files(paths, node_name: str) -> list[str]:
+    """The parameter files among ``paths`` with no section for the node ``node_name`` (its
+    fully qualified name, ``/map_merge``): rcl applies none of their parameters, silently (a file
+    written for another node, or for a node renamed since). Sections are found as rcl reads them:
+    the names leading to a ``ros__parameters:`` key, nested names joined by ``/``, with the
+    wildcards ``*`` (one name) and ``/**`` (any names)."""
+    import yaml
+
+    def sections(doc, prefix=""):
+        if isinstance(doc, dict):
+            for k, v in doc.items():
+                if k == "ros__parameters":
+                    yield prefix or "/"
+                elif isinstance(k, str):
+                    yield from sections(v, f"{prefix}/{k.strip('/')}")
+
+    def applies(section: str) -> bool:
+        rx = re.escape(section).replace(r"/\*\*", r"(?:/.*)?").replace(r"\*", r"[^/]*")
+        return re.fullmatch(rx, node_name) is not None
+
+    out = []
+    for p in paths:
+        try:
+            doc = yaml.safe_load(Path(p).read_text(encoding="utf-8"))
+        except (OSError, ValueError, yaml.YAMLError):
+            continue   # refused before the node starts (check_params_file)
+        if not any(applies(s) for s in sections(doc)):
+            out.append(str(p))
+    return out
