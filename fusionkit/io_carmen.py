@@ -17,7 +17,8 @@ from typing import Callable
 
 import numpy as np
 
-from ._atomic import check_not_input, check_out_dir, made_out_dir, write_set
+from ._atomic import (_journal_path, check_not_input, check_out_dir, hidden_copies, made_out_dir,
+                      recover_set, write_set)
 from .carmen_read import (NO_RETURN_BAND, CarmenConfig, CarmenLog, CarmenStats,  # noqa: F401
                           flaser_geometry, read_carmen)
 from .errors import InputError
@@ -174,8 +175,15 @@ def _outputs_for(out_dir: Path, name: str) -> tuple[Path, Path, Path]:
 
 
 def check_outputs(paths, inputs, *, overwrite: bool) -> None:
-    """Refuse to write over an input, or over an existing file unless ``overwrite``."""
+    """Refuse to write over an input, or over an existing file unless ``overwrite``: files of
+    an import killed while it put them in place are not existing ones (that import is finished
+    or undone first, as the next write would)."""
     check_not_input(paths, inputs)
+    paths = [Path(p) for p in paths]
+    names = "|".join(re.escape(p.name) for p in paths)
+    for p in paths:
+        if _journal_path(p).is_file():
+            recover_set(p, hidden_copies(names), paths)
     if not overwrite:
         existing = [str(p) for p in paths if Path(p).exists()]
         if existing:

@@ -362,3 +362,35 @@ def test_an_empty_name_is_refused_not_replaced(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "map name ''" in err, err
     assert not (tmp_path / "o").exists()
+
+
+class _Killed(BaseException):
+    """A kill -9 played in the process: nothing after it runs, nothing is rolled back."""
+
+
+@pytest.mark.parametrize("split", [None, 2])
+def test_an_import_killed_mid_commit_into_a_new_folder_can_be_run_again_without_force(
+        tmp_path, monkeypatch, split):
+    """Killed while it put its files in place, an import left some of them in view; the same
+    import run again said they already existed (--force needed) though no import had finished."""
+    import os
+
+    from fusionkit import _atomic
+    p = write(tmp_path, [flaser([2.0] * 180, (i * 0.1, 0, 0), i) for i in range(6)])
+    out = tmp_path / "o"
+    real, calls = os.replace, []
+
+    def killed(src, dst):
+        calls.append(dst)
+        if len(calls) == 3:   # the journal, a first file, then killed
+            raise _Killed
+        return real(src, dst)
+
+    monkeypatch.setattr(_atomic.os, "replace", killed)
+    monkeypatch.setattr(_atomic, "_rollback", lambda entries: False)  # killed: no undo
+    with pytest.raises(_Killed):
+        import_carmen(p, out, split=split)
+    monkeypatch.undo()
+    assert any(not f.name.startswith(".") for f in out.iterdir())   # part of it in view
+    import_carmen(p, out, split=split)                               # no --force needed
+    assert not [f.name for f in out.iterdir() if f.name.startswith(".")]
