@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterator
 
 __all__ = ["Terminated", "HungUp", "install", "deferred", "pending", "signal_of", "exit_status",
-           "check", "swallowed", "forget",
+           "check", "swallowed", "forget", "watching",
            "EXIT_SIGINT", "EXIT_SIGTERM", "EXIT_SIGHUP"]
 
 #: Exit statuses of a command stopped by SIGINT (Ctrl-C), SIGTERM and SIGHUP (a closed
@@ -36,6 +36,7 @@ _deferring = 0
 #: swallowed it (an optional import that fails with ImportError while it loads) or turned it
 #: into another error lost the user's Ctrl-C (:func:`check`, :func:`swallowed`)
 _received: list[int] = []
+_watching = False   # a command of the command line runs (:func:`watching`)
 
 
 class Terminated(KeyboardInterrupt):
@@ -51,7 +52,8 @@ def _raise(signum, frame):  # noqa: ARG001 (signal handler signature)
     if _deferring:
         _pending.append(signum)
         return
-    _received.append(signum)
+    if _watching:
+        _received.append(signum)
     raise _exception(signum)
 
 
@@ -69,6 +71,20 @@ def swallowed() -> KeyboardInterrupt | None:
     return _exception(_received[-1]) if _received else None
 
 
+@contextlib.contextmanager
+def watching() -> Iterator[None]:
+    """Keep the interrupts that arrive inside the block for :func:`check` and
+    :func:`swallowed` (a command of the command line); outside it (a notebook, a program using
+    the library, after a command ended) an interrupt is the caller's to handle."""
+    global _watching
+    forget()
+    _watching = True
+    try:
+        yield
+    finally:
+        _watching = False
+
+
 def forget() -> None:
     """The interrupts so far are handled (the command said so and ends, or a new one starts)."""
     _received.clear()
@@ -79,7 +95,7 @@ def check() -> None:
     outputs are written, so that a Ctrl-C that came while modules loaded is not lost and the
     old outputs are not replaced."""
     exc = swallowed()
-    if exc is not None and all(signal.getsignal(s) is _raise for s in _SIGNALS):
+    if exc is not None and _watching and all(signal.getsignal(s) is _raise for s in _SIGNALS):
         _received.clear()
         raise exc
 
@@ -123,7 +139,6 @@ def install() -> None:
     """Turn SIGINT and SIGTERM into exceptions (main thread only; elsewhere a no-op)."""
     if threading.current_thread() is not threading.main_thread():
         return
-    forget()
     for s in _SIGNALS:
         signal.signal(s, _raise)
     if not getattr(sys.unraisablehook, "installed", False):

@@ -748,3 +748,22 @@ def test_a_group_map_a_merge_removes_never_names_a_missing_image_mid_commit(tmp_
               remove=group_map_files(out / "merged.yaml"))
     assert seen and all(seen), seen
     assert sorted(p.name for p in out.iterdir()) == ["merged.pgm", "merged.report.json", "merged.yaml"]
+
+
+def test_a_ctrl_c_handled_after_a_command_does_not_stop_a_later_save(tmp_path, capsys):
+    """After a command run in the process (a notebook's cli.main), a Ctrl-C the caller handled
+    itself made the next save raise it again and write nothing."""
+    from fusionkit import cli
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        assert cli.main(["merge", "missing_a.yaml", "missing_b.yaml", "-o", str(tmp_path / "m.yaml")]) == 2
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.5)
+        except KeyboardInterrupt:
+            pass   # the caller's own handling
+        _atomic.write_text_atomic(tmp_path / "note.txt", "kept")
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    assert (tmp_path / "note.txt").read_text() == "kept"

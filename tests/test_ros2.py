@@ -95,6 +95,8 @@ def test_a_half_given_initial_pose_skips_that_robot_not_the_node():
     ({"merging_rate": 1e-11}, "parameter merging_rate: expected a rate in Hz"),
     ({"estimation_rate": 1e-12}, "parameter estimation_rate: expected a rate in Hz"),
     ({"seed": 99999999999999999999}, "parameter seed: expected a whole number from 0 to 2^63 - 1"),
+    ({"seed": 10 ** 400}, "parameter seed: expected a whole number from 0 to 2^63 - 1"),
+    ({"seed": 1.5}, "parameter seed: expected a whole number from 0 to 2^63 - 1"),
     ({"max_map_cells": 2 ** 70}, "parameter max_map_cells: expected a whole number from 0 to 2^63 - 1"),
     # a robot no topic can name: the node waited for it for ever
     ({"reference_robot": "///"}, "parameter reference_robot: give a robot's namespace such as /robot_1"),

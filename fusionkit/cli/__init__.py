@@ -131,12 +131,14 @@ def main(argv=None) -> int:
     """
     if argv is None:   # the program itself: once its command is done, a Ctrl-C is too late
         try:
-            return _main(None)
+            with _signals.watching():
+                return _main(None)
         finally:
             # Python restores SIGINT's default action as it shuts down: a Ctrl-C in the
             # 0.1 s that takes killed a command that had finished, with no word
             _quiet_signals()
-    return _main(argv)
+    with _signals.watching():
+        return _main(argv)
 
 
 def _main(argv) -> int:

@@ -120,7 +120,8 @@ def _coerce(name: str, value, kind: str):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise InputError(f"parameter {name}: expected a number, got {value!r}")
     if kind == "count":
-        if not math.isfinite(float(value)) or float(value) != int(value) or not 0 <= value <= 2**63 - 1:
+        whole = isinstance(value, int) or (math.isfinite(value) and value == int(value))
+        if not whole or not 0 <= value <= 2**63 - 1:
             raise InputError(f"parameter {name}: expected a whole number from 0 to 2^63 - 1, "
                              f"got {value!r}")
         return int(value)
