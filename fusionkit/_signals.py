@@ -128,6 +128,8 @@ def _unraisable(hook):
         exc = info.exc_value
         if isinstance(exc, KeyboardInterrupt) and all(signal.getsignal(s) is _raise
                                                       for s in _SIGNALS):
+            if _received:   # sent again: kept when it comes, not now (a check would raise it
+                _received.pop()   # while the signal is on its way, which then finds an exit)
             threading.Timer(_AGAIN_S, os.kill, (os.getpid(), signal_of(exc))).start()
             return
         hook(info)
