@@ -185,7 +185,7 @@ def check_outputs(paths, inputs, *, overwrite: bool) -> None:
         if _journal_path(p).is_file():
             recover_set(p, hidden_copies(names), paths)
     if not overwrite:
-        existing = [str(p) for p in paths if Path(p).exists()]
+        existing = [str(p) for p in paths if p.exists()]
         if existing:
             more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
             raise InputError(f"{existing[0]}{more} already exist{'s' if not more else ''}; "

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import check_not_input, hidden_copies, recover_set, write_set
+from .._guards import _same_file
 from ..grid import OccupancyGrid
 from ..resample import resample
 from ..transform import Transform2D
@@ -285,16 +286,7 @@ def write_outputs(result: BenchResult, out_dir: str | os.PathLike, summary: dict
            "seconds": round(result.seconds, 2), "summary": s, "cases": list(result.cases)}
     commit = (out / "bench.json", (json.dumps(doc, indent=1, default=_json_default) + "\n").encode("utf-8"))
     new = {p for p, _ in files}
-    kept = {os.path.realpath(p) for p in inputs}
     stale = [p for p in sorted(out.glob("bench_*.png"))
-             if p not in new and p.is_file() and not _is_input(p, kept, inputs)]
+             if p not in new and p.is_file() and not any(_same_file(q, p) for q in inputs)]
     write_set(files + [(p, None) for p in stale], commit)
     return [out / "bench.md", out / "bench.json"] + [p for p, _ in files if p.suffix == ".png"]
-
-
-def _is_input(path: Path, kept: set, inputs) -> bool:
-    """Whether ``path`` is one of ``inputs`` (``kept``, their real paths), by a link or a hard
-    link too."""
-    if os.path.realpath(path) in kept:
-        return True
-    return any(q.exists() and os.path.samefile(q, path) for q in inputs)

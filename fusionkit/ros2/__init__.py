@@ -32,18 +32,19 @@ def run_merge_node(ros_args=(), params_files=(), *, name: str = "map_merge") -> 
     InputError
         ROS 2 not installed, bad arguments, a parameter with a bad value.
     """
-    from ._runtime import ros_argv, ros_context, unapplied_params_files
+    from ._runtime import _params_files, ros_argv, ros_context, unapplied_params_files
     from .node import MergeNode, read_settings
 
-    with ros_context(ros_argv("fusionkit-merge-node", ros_args, params_files)) as rclpy:
+    argv = ros_argv("fusionkit-merge-node", ros_args, params_files)
+    with ros_context(argv) as rclpy:
         from rclpy.node import Node
 
         node = Node(name, allow_undeclared_parameters=True,
                     automatically_declare_parameters_from_overrides=True)
-        files = list(params_files) + [b for a, b in zip(ros_args, list(ros_args)[1:]) if a == "--params-file"]
-        for f in unapplied_params_files(files, node.get_fully_qualified_name()):
-            node.get_logger().warn(f"{f}: no section for this node ({node.get_fully_qualified_name()}:"
-                                   f" ros__parameters: ...); none of its parameters is applied")
+        name = node.get_fully_qualified_name()
+        for f in unapplied_params_files(_params_files(argv), name):
+            node.get_logger().warn(f"{f}: no section for this node ({name}: ros__parameters: "
+                                   f"...); none of its parameters is applied")
         merger = None
         try:
             merger = MergeNode(node, read_settings(node))

@@ -90,6 +90,10 @@ class NodeSettings:
             check_topic(f"parameter {name}", getattr(self, name))
         if not self.world_frame:
             raise InputError("parameter world_frame: give a frame name such as 'world'")
+        for name in ("merging_rate", "discovery_rate", "estimation_rate"):
+            # as map_merge's files for known poses give it, estimation_rate 0: no estimation
+            if getattr(self, name) == 0 and not (name == "estimation_rate" and self.known_init_poses):
+                raise _bad_rate(name, getattr(self, name))
         if self.switch_confirmations < 1:
             raise InputError("parameter switch_confirmations: must be >= 1")
         if self.max_map_cells < 1:
@@ -103,6 +107,12 @@ class NodeSettings:
 
 #: The least rate (Hz) of a timer of the node
 MIN_RATE = 1e-6
+
+
+def _bad_rate(name: str, value) -> InputError:
+    # a rarer rate overflows the timers (about 11.6 days between two rounds at the least)
+    return InputError(f"parameter {name}: expected a rate in Hz, from {MIN_RATE:g} to 1000, "
+                      f"got {value!r}")
 
 
 def _coerce(name: str, value, kind: str):
@@ -128,10 +138,8 @@ def _coerce(name: str, value, kind: str):
     v = float(value)
     if not math.isfinite(v):
         raise InputError(f"parameter {name}: expected a finite number, got {value!r}")
-    if kind == "rate" and not MIN_RATE <= v <= 1000.0:
-        # a rarer rate overflows the timers (about 11.6 days between two rounds at the least)
-        raise InputError(f"parameter {name}: expected a rate in Hz, from {MIN_RATE:g} to 1000, "
-                         f"got {value!r}")
+    if kind == "rate" and not (v == 0 or MIN_RATE <= v <= 1000.0):   # 0: NodeSettings decides
+        raise _bad_rate(name, value)
     if kind == "unit" and not 0.0 <= v <= 1.0:
         raise InputError(f"parameter {name}: expected a number between 0 and 1, got {value!r}")
     return v
@@ -162,22 +170,13 @@ def init_poses_from(values: dict) -> tuple[dict, dict]:
 def settings_from(values: dict) -> NodeSettings:
     """Settings from parameter values (``name -> value``; missing names take their defaults)."""
     kw = {}
-    known = _coerce("known_init_poses", values.get("known_init_poses", False), "bool") \
-        if values.get("known_init_poses") is not None else False
     for name, (default, kind, _help) in PARAMETERS.items():
         if name in values and values[name] is not None:
-            if name == "estimation_rate" and known and _is_zero(values[name]):
-                kw[name] = 0.0   # as map_merge's files for known poses give it: no estimation
-                continue
             kw[name] = _coerce(name, values[name], kind)
     if kw.get("known_init_poses", PARAMETERS["known_init_poses"][0]):
         kw["init_poses"], kw["partial_init_poses"] = init_poses_from(values)
     # else, as map_merge, initial poses are not read (a half-given one is no error)
     return NodeSettings(**kw)
-
-
-def _is_zero(value) -> bool:
-    return not isinstance(value, bool) and isinstance(value, (int, float)) and value == 0
 
 
 #: an initial pose written nested in a parameters file (``robot_3: map_merge: init_pose_x:``)

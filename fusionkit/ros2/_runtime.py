@@ -97,6 +97,13 @@ def _stderr_held():
                     os.write(2, text)
 
 
+def _params_files(argv) -> list[str]:
+    """The parameter files of an ``rclpy`` argument list (each after ``--params-file``)."""
+    if argv and argv[-1] == "--params-file":
+        raise InputError("--params-file: give the parameter file after it")
+    return [b for a, b in zip(argv, argv[1:]) if a == "--params-file"]
+
+
 @contextlib.contextmanager
 def ros_context(argv):
     """``rclpy`` initialised with ``argv``; shut down on the way out however it is left
@@ -104,11 +111,8 @@ def ros_context(argv):
     rclpy = require_rclpy()
     from rclpy.executors import ExternalShutdownException
 
-    for i, a in enumerate(argv):
-        if a == "--params-file":
-            if i + 1 >= len(argv):
-                raise InputError("--params-file: give the parameter file after it")
-            check_params_file(argv[i + 1])
+    for f in _params_files(argv):
+        check_params_file(f)
     try:
         with _stderr_held():
             rclpy.init(args=list(argv))
