@@ -8,6 +8,8 @@ whole and of one write: the old one or the new one, never a mix, never a tempora
 
 from __future__ import annotations
 
+import argparse
+import json
 import json
 import os
 import pickle
@@ -767,3 +769,33 @@ def test_a_ctrl_c_handled_after_a_command_does_not_stop_a_later_save(tmp_path, c
         for s, h in saved.items():
             signal.signal(s, h)
     assert (tmp_path / "note.txt").read_text() == "kept"
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["import", "carmen", "missing.log", "--out", "OUT"], "fusionkit import carmen"),
+    (["export", "rosbag", "missing_run", "--out", "OUT.bag"], "fusionkit export rosbag"),
+    (["import", "cramen", "missing.log"], "fusionkit import"),
+])
+def test_a_ctrl_c_while_a_command_with_kinds_loads_names_the_command_whole(monkeypatch, capsys, argv,
+                                                                         named):
+    """Stopped while its modules loaded, ``import carmen`` said ``fusionkit import: interrupted``,
+    not the command the user typed (and its usage errors name)."""
+    from fusionkit import cli
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    _swallowing(monkeypatch, RuntimeError("Error calling __set_name__ on 'cached_property'"))
+    try:
+        code = cli.main(argv)
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    assert code == 130
+    assert capsys.readouterr().err == f"{named}: interrupted; no output was left half-written\n"
+
+
+def test_the_kinds_an_interrupt_names_are_those_the_commands_register():
+    from fusionkit.cli import KINDS, build_parser
+    for command, kinds in KINDS.items():
+        parser = build_parser([command])
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        inner = next(a for a in sub.choices[command]._actions if isinstance(a, argparse._SubParsersAction))
+        assert tuple(inner.choices) == kinds, command

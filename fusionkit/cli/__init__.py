@@ -39,12 +39,27 @@ COMMANDS = {
 COMMAND_MODULES = tuple(module for module, _ in COMMANDS.values())
 
 
+#: The kinds of the subcommands that have kinds (``fusionkit import carmen``), as their
+#: modules register them: an interrupt while those load names the command whole.
+KINDS = {"import": ("carmen", "rosbag"), "export": ("rosbag",), "ros2": ("merge-node", "play")}
+
+
 def _command_of(argv) -> str | None:
     """The subcommand named in ``argv`` (its first word that is not an option), if any."""
     for word in argv:
         if not word.startswith("-"):
             return word if word in COMMANDS else None
     return None
+
+
+def _named(argv) -> str | None:
+    """The subcommand named in ``argv`` with its kind, if given ("import carmen")."""
+    command = _command_of(argv)
+    if command not in KINDS:
+        return command
+    words = [w for w in argv if not w.startswith("-")]
+    kind = words[1] if len(words) > 1 else None
+    return f"{command} {kind}" if kind in KINDS[command] else command
 
 
 class _Parser(argparse.ArgumentParser):
@@ -149,7 +164,7 @@ def _main(argv) -> int:
     try:
         _signals.install()
         argv = sys.argv[1:] if argv is None else list(argv)
-        named = _command_of(argv)
+        named = _named(argv)
         if named:   # an interrupt while the command's modules load still names it
             command = f"fusionkit {named}"
         parser = build_parser(argv)
