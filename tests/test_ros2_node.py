@@ -377,6 +377,7 @@ def test_known_init_poses_from_a_map_merge_params_file(procs, run3, tmp_path):
     assert not status["robots"]["/robot_3"]["placed"]
     assert "initial pose incomplete" in status["robots"]["/robot_3"]["reason"]
     assert procs.stop("node") == 0
+    assert procs.log("node").count("initial pose incomplete") == 1   # at start, not again when found
     poses = {p["robot"]: p for p in _records(probe_out, "pose")}
     assert (poses["robot_2"]["x"], poses["robot_2"]["y"]) == (-3.0, 1.0)
     assert poses["robot_2"]["theta"] == pytest.approx(1.5)

@@ -99,8 +99,8 @@ class MergeNode:
                 f"method {settings.method}, estimation every {1 / settings.estimation_rate:.1f} s")
         self.log.info(f"map merging started: robots' '{settings.robot_map_topic}' topics into "
                       f"{self.merged_topic} (frame {settings.world_frame}), {mode}")
-        for robot, what in sorted(settings.partial_init_poses.items()):
-            self.log.warning(f"{robot}: initial pose incomplete: {what}; the robot will be skipped")
+        for robot, what in sorted(settings.partial_init_poses.items()):   # said once, here
+            self._once(("nopose", robot), f"{robot}: initial pose incomplete: {what}; robot skipped")
         self._discover()
         node.create_timer(1.0 / settings.discovery_rate, self._guard(self._discover))
         # at start the ROS graph is not yet known to this node (the discovery above finds no
