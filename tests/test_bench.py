@@ -185,9 +185,30 @@ def test_without_folders_it_says_which_maps_it_benches_on(tmp_path, monkeypatch,
     from fusionkit.cli import main
     monkeypatch.chdir(tmp_path)
     assert main(["bench", "--cases", "1", "--methods", "map-merge", "--modes", "crop",
-                 "--worlds", "cave", "--out", str(tmp_path / "out")]) == 0
+                 "--out", str(tmp_path / "out")]) == 0
     said = capsys.readouterr()
     assert "no ./maps or ./maps/real here: the built-in worlds only" in said.out + said.err
+
+
+def test_worlds_named_with_no_folder_are_benched_alone(tmp_path, monkeypatch, capsys):
+    """``fusionkit bench --worlds office`` run beside a ./maps folder drew its cases from every
+    map there too (25 worlds from the project's folder), and said so only in passing."""
+    import shutil
+    from pathlib import Path
+
+    (tmp_path / "maps").mkdir()
+    for ext in ("yaml", "pgm"):
+        shutil.copy(Path(__file__).parents[1] / "maps" / f"cave.{ext}", tmp_path / "maps")
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--worlds", "office", "--cases", "2", "--methods", "map-merge", "--modes",
+                 "crop", "--out", "out", "--quiet"]) == 0
+    report = json.loads((tmp_path / "out" / "bench.json").read_text())
+    assert [c["world"] for c in report["cases"]] == ["office", "office"]
+    assert main(["bench", "--cases", "2", "--methods", "map-merge", "--modes", "crop", "--out",
+                 "out2"]) == 0   # no folder and no --worlds: ./maps and the built-in worlds
+    assert "no folder given: the maps of ./maps, and the built-in worlds" in capsys.readouterr().out
+    report = json.loads((tmp_path / "out2" / "bench.json").read_text())
+    assert [c["world"] for c in report["cases"]] == ["cave", "office"]
 
 
 def test_a_wall_one_cell_wide_stays_in_the_picture_of_a_large_floor():

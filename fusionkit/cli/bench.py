@@ -30,10 +30,12 @@ def register(sub) -> None:
                     "case per method). Results do not depend on --jobs or on the back end; timings do.")
     p.add_argument("folders", nargs="*", metavar="DIR",
                    help="folders of ground-truth maps (*.yaml); default: maps and maps/real, plus "
-                        "the built-in worlds not already found there")
+                        "the built-in worlds not already found there (none when --worlds names "
+                        "worlds)")
     p.add_argument("--worlds", nargs="*", choices=list(WORLDS), default=None, metavar="NAME",
-                   help=f"built-in worlds to add ({', '.join(WORLDS)}); default: all of them when no "
-                        f"folder is given, none otherwise")
+                   help=f"built-in worlds to bench ({', '.join(WORLDS)}): beside the folders "
+                        f"given, or alone when none is; default: all of them when no folder is "
+                        f"given, none otherwise")
     p.add_argument("--logs", nargs="+", default=[], metavar="LOG",
                    help="CARMEN laser logs (files, or folders of *.log) to add as 'log' cases: each "
                         "log split into K sessions for every K of --robots (one case each, beside "
@@ -100,7 +102,8 @@ def run(args) -> int:
 
     folders = list(args.folders)
     builtin = args.worlds
-    if not folders:
+    defaulted = not folders and not builtin   # `--worlds office` alone benches the office alone
+    if defaulted:
         folders = [f for f in ("maps", "maps/real") if Path(f).is_dir()]
         if builtin is None:
             from ..worlds import WORLDS
@@ -137,7 +140,7 @@ def run(args) -> int:
     inputs = _inputs(folders if use_maps else [], logs)
     check_not_input(output_files(out, config.methods), inputs)
     progress = ProgressBar("bench", unit="cases", enabled=False if args.quiet else None)
-    if not args.folders and use_maps and not args.quiet:
+    if defaulted and use_maps and not args.quiet:
         # the default folders are relative to where the command runs: say what was found
         print("no folder given: the maps of " + " and ".join(f"./{f}" for f in folders)
               + ", and the built-in worlds" if folders else
