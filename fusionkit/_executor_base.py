@@ -4,9 +4,12 @@ nothing else of :mod:`fusionkit.executor`)."""
 
 from __future__ import annotations
 
+import os
+import threading
+import time
 from typing import Any, Callable, Sequence
 
-__all__ = ["Executor", "Progress", "worker_setup"]
+__all__ = ["Executor", "Progress", "worker_setup", "exit_with_parent"]
 
 Progress = Callable[[int, int], None]
 
@@ -25,6 +28,23 @@ def worker_setup() -> None:
 
 
 _SET_UP = False
+
+
+def exit_with_parent(every: float = 0.5) -> None:
+    """End this worker process when the process that started it is gone (killed with
+    ``kill -9``, it can tell its workers nothing: they ran on for good, blocked writing results
+    to a pipe nobody reads). A daemon thread looks every ``every`` seconds."""
+    import os
+    import threading
+
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(every)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
 class Executor:

@@ -34,7 +34,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolE
 from typing import Iterator
 
 from . import _signals
-from ._executor_base import Executor, worker_setup
+from ._executor_base import Executor, exit_with_parent, worker_setup
 from .errors import InputError
 
 __all__ = ["Executor", "InProcess", "LocalProcesses", "DaskExecutor", "make_executor", "using",
@@ -95,6 +95,7 @@ class InProcess(Executor):
 
 
 def _process_init(token, shared):
+    exit_with_parent()
     worker_setup()
     _SHARED.clear()
     _SHARED[token] = shared

@@ -416,3 +416,60 @@ def test_a_scheduler_without_dashboard_pages_is_said_to_have_none(tmp_path):
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait(10)
+
+
+_KILLED = """
+import os, sys, time
+from fusionkit.executor import LocalProcesses
+from test_executor import _pid_then_wait
+ex = LocalProcesses(2)
+print(*sorted(set(ex.map(_pid_then_wait, [0.3, 0.3, 0.3, 0.3]))), flush=True)
+ex.map(_pid_then_wait, [60.0] * 4)
+"""
+
+
+def _pid_then_wait(shared, seconds):
+    time.sleep(seconds)
+    return __import__("os").getpid()
+
+
+def _gone(pid: int, seconds: float) -> bool:
+    """Whether process ``pid`` has ended (a zombie counts as ended) within ``seconds``."""
+    from pathlib import Path
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            if Path(f"/proc/{pid}/stat").read_text().split(") ")[-1].startswith(("Z", "X")):
+                return True
+        except (FileNotFoundError, ProcessLookupError):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_workers_of_a_run_killed_with_kill_9_end_with_it():
+    """``kill -9`` of a ``bench --workers 2`` left both workers running for good, blocked writing
+    their results to a pipe nobody read."""
+    import os
+    import subprocess
+    from pathlib import Path
+    here = Path(__file__).parent
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(here), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-c", _KILLED], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True, env=env, cwd=here)
+    workers = []
+    try:
+        with deadline(120):
+            workers = [int(p) for p in proc.stdout.readline().split()]
+        assert len(workers) == 2
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+        proc.stdout.close()
+    try:
+        assert all(_gone(pid, 15) for pid in workers)
+    finally:
+        for pid in workers:   # stopped by their handle if the run left them
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
