@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -740,6 +741,15 @@ def test_a_placement_given_as_a_prior_is_refined_and_judged_with_the_search():
                              priors=priors).diagnostics["pair"]
     alone = search()
     assert not alone.accepted and "contradicted" in alone.reason
+    # the reason's numbers bear out what it says of them (it said "outweigh" of equal counts,
+    # beside a share of another measure)
+    said = re.search(r"(\d+) wall cells meet the other map's walls and (\d+) miss them, (\d+) of "
+                     r"those on its open floor; counting those three times, (\d+) misses weigh "
+                     r"(as much as|more than) the walls that meet$", alone.reason)
+    assert said, alone.reason
+    meet, miss, floor, weighed = map(int, said.groups()[:4])
+    assert weighed == miss + 2 * floor and weighed >= meet
+    assert (said[5] == "as much as") == (weighed == meet)
     assert placement_error(alone.best.transform, truth, b)[0] > 50 * res
     given = search([truth])
     assert given.accepted and given.best.source == "prior"

@@ -426,10 +426,11 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
                   f"them, where {cfg.cross_wall:g} m is needed to fix it along them")
     elif best.rank <= 0:
         chk = best.check
+        misses = chk.disagreeing + 2 * chk.conflicts   # what ``rank`` takes away
         reason = (f"best placement is contradicted: {chk.agreeing} wall cells meet the other "
-                  f"map's walls ({100 * chk.score:.0f}%) and {chk.disagreeing} miss them, "
-                  f"{chk.conflicts} of those on its open floor; counting those three times, the "
-                  f"misses outweigh the walls that meet")
+                  f"map's walls and {chk.disagreeing} miss them, {chk.conflicts} of those on its "
+                  f"open floor; counting those three times, {misses} misses weigh "
+                  f"{'as much as' if misses == chk.agreeing else 'more than'} the walls that meet")
     elif null.usable and null.misses_too_much(best.check):
         chk = best.check
         reason = (f"best placement misses too much: {chk.agreeing} wall cells meet the other map's "
