@@ -326,6 +326,7 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
     rep = read_report(report_path, merged) if report_path is not None else None
     robots = truth_info.robots
 
+    guessed = False   # the frame taken as the first robot's, for want of a report or --reference
     if rep is not None:
         # a report names its inputs relative to the folder merge ran in: most often the
         # output's folder or one above it (merge a/b/robot_1.yaml ... -o a/b/merged.yaml)
@@ -350,6 +351,7 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
         # robot's (the frame a merge of the run in order is in)
         own = next((name for name in robots if _same_file(merged, _map_of(truth_info, name))), None)
         ref = reference if reference is not None else own if own is not None else next(iter(robots))
+        guessed = reference is None and own is None
         if ref not in robots:
             raise InputError(f"--reference {ref}: no such robot in {truth_info.path}; choose one of "
                              f"{', '.join(robots)}")
@@ -384,7 +386,7 @@ def evaluate_files(merged, truth, *, report=None, reference: str | None = None) 
     return {
         "merged": str(merged), "truth": str(truth_info.path), "world": str(truth_info.world),
         "report": str(report_path) if report_path is not None else None, "reference": ref,
-        "group": rep["group"] if rep is not None else None,
+        "group": rep["group"] if rep is not None else None, "frame_guessed": guessed,
         "metrics": metrics.as_dict(), "maps": rows,
     }
 
@@ -408,12 +410,18 @@ def format_evaluation(result: dict) -> str:
     ]
     if result["report"] is None:
         lines += ["", "no merge report found: give --report for per-map transform errors"]
+        if result.get("frame_guessed"):
+            lines.append(f"the map was taken to be in the frame of {result['reference']}, the first "
+                         f"robot of the truth: give --reference ROBOT if it is in another's")
         return "\n".join(lines)
     where = (f"group {result['group']} of the report {result['report']}; transforms into that "
              f"group's map" if result.get("group") else
              f"report {result['report']}; transforms into the merged frame")
+    # of a group's map, whether the map is in it (the report has each of them left out of the
+    # merged map)
+    column = "in map" if result.get("group") else "merged"
     lines += ["", f"per map ({where}):",
-              f"  {'map':<24} {'merged':<6} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'th (deg)':>8}"
+              f"  {'map':<24} {column:<6} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'th (deg)':>8}"
               f" {'true x':>8} {'true y':>8} {'true th':>8} {'err (m)':>8} {'cells':>6} {'deg':>6}"]
     labels = [clip_left(r["input"], 24) for r in result["maps"]]
     for k, r in enumerate(result["maps"]):
