@@ -237,6 +237,13 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root):
         await pilot.press("n")
         await pilot.pause()
         assert out.stat().st_mtime_ns == stamp
+        # kept: back to the path (it closed the export, and the keys typed next ran commands)
+        assert isinstance(app.screen, ExportScreen)
+        assert app.screen.query_one(Input).value == str(out)
+        assert "Those files are kept" in str(app.screen.query_one("#export-note").render())
+        await pilot.press("escape")
+        await pilot.pause()
+        assert not isinstance(app.screen, ExportScreen) and out.stat().st_mtime_ns == stamp
         os.utime(out, ns=(stamp - 10**9, stamp - 10**9))
         await pilot.press("e")
         await pilot.pause()

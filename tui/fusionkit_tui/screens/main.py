@@ -386,8 +386,13 @@ class MainScreen(Screen):
             def answered(yes: bool | None) -> None:
                 if yes:
                     self.export(path)
-                else:
-                    self.notify("nothing written", severity="warning")
+                    return
+                # kept: the dialog again with the path, for another name (escape leaves), so
+                # that the keys typed next edit the path rather than run commands
+                self.app.push_screen(ExportScreen(path, output_guard(self.inputs),
+                                                  note="Those files are kept: change the path, or "
+                                                       "escape to write nothing.",
+                                                  groups=len(self.result.groups)), self._export_to)
 
             self.app.push_screen(ConfirmScreen(overwrite_question(existing)), answered)
         else:
