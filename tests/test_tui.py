@@ -1095,3 +1095,32 @@ async def test_long_map_names_leave_the_metrics_columns_in_view(in_root):
                                                                   metrics.size)
         labels = [str(metrics.get_row_at(k)[0]) for k in range(metrics.row_count)]
         assert all(x.startswith("+ ") for x in labels[1:]), labels
+
+
+async def test_a_result_of_other_maps_than_those_chosen_now_is_said_to_be_earlier(in_root):
+    """After the reference was changed or a map taken away, the Result tab went on showing the
+    merge of the maps chosen before, unsaid, and e exported it as if it were of those now."""
+    app = make_app(["run"])
+    async with app.run_test(size=(100, 30)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        await run_merge(pilot)
+        heading = lambda: str(screen.result_panel.query_one("#fused-heading").render())  # noqa: E731
+        assert "(earlier run)" not in heading()
+        dropped = screen.maps.selected[-1]
+        screen.maps.toggle(dropped)
+        await pilot.pause()
+        assert "(earlier run)" in heading()
+        assert "the maps chosen have changed" in str(screen.result_panel.query_one("#why").render())
+        await pilot.press("e")
+        await pilot.pause()
+        assert isinstance(app.screen, ExportScreen)
+        assert "have changed since the merge" in str(app.screen.query_one("#export-note").render())
+        await pilot.press("escape")
+        await pilot.pause()
+        screen.maps.toggle(dropped)   # the same maps again, in the same order: the result is theirs
+        await pilot.pause()
+        assert "(earlier run)" not in heading()
+        await pilot.press("e")
+        await pilot.pause()
+        assert isinstance(app.screen, ExportScreen) and not app.screen.query("#export-note")

@@ -83,6 +83,10 @@ class MainScreen(Screen):
         #: still held is known to be an earlier one.
         self.last_run_outcome: str | None = None
         self.result_time: str = ""
+        #: The maps chosen (the reference first) when the result's run started, and when the
+        #: running one did: a result of other maps than those chosen now is said to be earlier.
+        self.result_selection: list[Path] = []
+        self._running_selection: list[Path] = []
 
     def compose(self) -> ComposeResult:
         with TabbedContent(initial="maps"):
@@ -241,6 +245,7 @@ class MainScreen(Screen):
             self.action_show_tab("settings")
             return
         self.merging = True
+        self._running_selection = list(self.maps.selected)
         if self.result is not None:   # the Result tab keeps the last merge meanwhile: said so
             self.result_panel.mark_earlier(f"a merge is running; this is the merge of "
                                            f"{self.result_time}", running=True)
@@ -308,6 +313,7 @@ class MainScreen(Screen):
         self.exported = None
         self.last_run_outcome = None
         self.result_time = time.strftime("%H:%M:%S")
+        self.result_selection = self._running_selection
         r = msg.result
         merged = sum(p.merged for p in r.placements)
         summary = f"done: {merged} of {len(r.placements)} maps merged"
@@ -328,6 +334,21 @@ class MainScreen(Screen):
         if self.result is None:
             return ""
         return f" (the result of the earlier merge at {self.result_time} is kept)"
+
+    def _selection_changed(self) -> bool:
+        return self.result is not None and list(self.maps.selected) != self.result_selection
+
+    @on(MapsPane.Changed)
+    def _on_selection(self, msg: MapsPane.Changed) -> None:
+        # the Result tab shows the merge of the maps chosen then: said when they are no longer
+        # those chosen (another reference, a map added or taken away)
+        if self.merging or self.result is None or self.last_run_outcome is not None:
+            return
+        if self._selection_changed():
+            self.result_panel.mark_earlier(f"the maps chosen have changed since this merge of "
+                                           f"{self.result_time}")
+        else:
+            self.result_panel.clear_earlier()
 
     @on(MergeStopped)
     def _on_stopped(self, msg: MergeStopped) -> None:
@@ -365,11 +386,15 @@ class MainScreen(Screen):
             self.notify("nothing to export yet: run a merge first (r)", severity="warning")
             return
         note = ""
+        merged = sum(p.merged for p in self.result.placements)
         if self.last_run_outcome is not None:
-            merged = sum(p.merged for p in self.result.placements)
             note = (f"The last run {self.last_run_outcome}: this exports the EARLIER result, the "
                     f"merge of {self.result_time} ({merged} of {len(self.result.placements)} maps "
                     f"merged).")
+        elif self._selection_changed():
+            note = (f"The maps chosen have changed since the merge of {self.result_time}: this "
+                    f"exports that merge ({merged} of {len(self.result.placements)} maps merged); "
+                    f"r merges the maps chosen now.")
         self.app.push_screen(ExportScreen(self.default_export_path(), output_guard(self.inputs),
                                           note=note, groups=len(self.result.groups)), self._export_to)
 

@@ -187,6 +187,14 @@ class ResultPanel(Vertical):
         self.query_one("#why", Static).update(Text(why + hint, style="bold yellow"))
         self._draw_map()
 
+    def clear_earlier(self) -> None:
+        """Take back :meth:`mark_earlier`: the result shown is that of the maps chosen."""
+        if self._result is None or not self._earlier:
+            return
+        self._earlier = ""
+        self._explain(self.query_one("#placements", DataTable).cursor_row)
+        self._draw_map()
+
     def _draw_map(self) -> None:
         if self._result is None:
             return
