@@ -187,7 +187,7 @@ class SettingsForm(VerticalScroll, can_focus=True):
     }
     SettingsForm > Grid {
         grid-size: 3;
-        grid-columns: 13 19 1fr;
+        grid-columns: 13 21 1fr;
         grid-rows: 1;
         grid-gutter: 0 1;
         height: auto;
