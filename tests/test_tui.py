@@ -1124,3 +1124,14 @@ async def test_a_result_of_other_maps_than_those_chosen_now_is_said_to_be_earlie
         await pilot.press("e")
         await pilot.pause()
         assert isinstance(app.screen, ExportScreen) and not app.screen.query("#export-note")
+
+
+def test_the_metrics_table_gives_names_told_apart_by_folder_the_room_a_wide_screen_has():
+    """At 120 columns the Table 1 panel cut ``demo/robot_1`` and ``default/robot_1`` to
+    ``…o/robot_1`` and ``…t/robot_1``; at 80 it keeps its 12 columns for the fused map's sake."""
+    from fusionkit_tui.widgets.result_panel import metrics_label_width
+    names = ["robot_2", "demo/robot_1", "default/robot_1"]
+    assert metrics_label_width(names, 80) == 12
+    assert metrics_label_width(names, 120) == len("+ default/robot_1")
+    assert metrics_label_width(["robot_1", "robot_2"], 200) == 12
+    assert metrics_label_width(["a" * 60], 300) == 30

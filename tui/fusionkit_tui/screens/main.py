@@ -394,7 +394,7 @@ class MainScreen(Screen):
         elif self._selection_changed():
             note = (f"The maps chosen have changed since the merge of {self.result_time}: this "
                     f"exports that merge ({merged} of {len(self.result.placements)} maps merged); "
-                    f"r merges the maps chosen now.")
+                    f"escape, then r, merges the maps chosen now.")
         self.app.push_screen(ExportScreen(self.default_export_path(), output_guard(self.inputs),
                                           note=note, groups=len(self.result.groups)), self._export_to)
 

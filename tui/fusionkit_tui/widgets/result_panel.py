@@ -33,8 +33,20 @@ def merged_because(p, method: str) -> str:
     return f"confidence {p.confidence:.2f} by the consensus test (one 0-1 scale for every method)"
 
 
-#: Widest map name in the metrics table: the panel's 40 columns less four numbers' columns
+#: Widest map name in the metrics table at 80 columns: the panel's 40 columns less four
+#: numbers' columns (28)
 _METRICS_LABEL = 12
+_METRICS_NUMBERS = 28
+
+
+def metrics_label_width(names, screen_width: int) -> int:
+    """The width of the metrics table's first column: the longest name's ("+ " and all), on a
+    screen wider than 80 columns taking up to half the columns over 80 (at most 30), so that
+    names told apart by their folders (``demo/robot_1``, ``default/robot_1``) are not cut to
+    ``…o/robot_1`` and ``…t/robot_1``."""
+    needed = max((len(n) + 2 for n in names), default=0)
+    room = _METRICS_LABEL + max(0, screen_width - 80) // 2
+    return max(_METRICS_LABEL, min(needed, room, 30))
 
 
 class ResultPanel(Vertical):
@@ -140,12 +152,14 @@ class ResultPanel(Vertical):
         note.update(f"against {evaluation.truth}, in the frame of its {evaluation.reference}")
         metrics.add_columns("maps", "compl", "acc", "prec", "eff")
         order = list(result.fused.order)  # the maps in the fused map, in the order they were added
+        width = metrics_label_width([self._names[i] for i in order], self.app.size.width)
+        self.query_one("#scores").styles.width = width + _METRICS_NUMBERS
         for k, m in enumerate(evaluation.steps):
             # row k is the fused map after the (k+1)-th map of the fusion order was added
             # the end of a long name (the map's own), so that the four columns fit the panel
-            label = (clip_left(self._names[order[k]], _METRICS_LABEL) if k == 0 else
-                     "+ " + clip_left(self._names[order[k]], _METRICS_LABEL - 2)) \
-                if k < len(order) else clip_left(table1_label(k), _METRICS_LABEL)
+            label = (clip_left(self._names[order[k]], width) if k == 0 else
+                     "+ " + clip_left(self._names[order[k]], width - 2)) \
+                if k < len(order) else clip_left(table1_label(k), width)
             metrics.add_row(label, f"{m.completeness:.1f}",
                             f"{m.accuracy:.1f}",
                             f"{m.precision:.1f}", f"{m.efficiency:.1f}")
