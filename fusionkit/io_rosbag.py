@@ -43,8 +43,8 @@ from .errors import InputError
 from .io_carmen import (ImportedMap, check_name, check_outputs, default_name, mapping_config,
                         to_own_frame, write_robot_files)
 from .mapping import build_grid
-from .rosbag_frames import (_compose, _frame, _FrameTree, _read_tf_message, _sort_unique, _stamp_ns,
-                            _yaw, interpolate_poses)
+from .rosbag_frames import (_compose, _frame, _FrameTree, _read_tf_message, _same_robot, _sort_unique,
+                            _stamp_ns, _yaw, interpolate_poses)
 from .scanlog import ScanLog
 from .transform import Transform2D
 
@@ -407,10 +407,10 @@ def _read(bag: _Bag, path: Path, scan_topic: str, source: PoseSource, progress) 
         pose_frame = Counter(p[2] for p in pose_msgs).most_common(1)[0][0]
         child = Counter(p[3] for p in pose_msgs).most_common(1)[0][0]
         steps = tree.path(child, sensor_frame, static_only=True) if sensor_frame else None
-        if steps:
-            offset, _ = tree.evaluate(steps, stamps)
-            pose = _compose(pose, offset)
-        else:
+        if steps:   # the laser's mounting
+            pose = _compose(pose, tree.evaluate(steps, stamps)[0])
+        else:   # the laser taken to sit at the pose's frame: of the same robot
+            _same_robot(path, sensor_frame, child, source.odom_topic)
             sensor_frame = child
     else:
         fixed = source.fixed_frame

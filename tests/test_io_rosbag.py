@@ -506,3 +506,19 @@ def test_an_exported_bag_is_on_disk_before_it_takes_its_name(run_dir, tmp_path, 
     # every file of the bag was flushed under its temporary name before the bag was named
     assert {p.name for p in files} <= {Path(s).name for s in named[-1]}, (files, named[-1])
     assert res.path == bag
+
+
+def test_the_odometry_of_another_robot_is_refused(run_dir, tmp_path, capsys):
+    """``--scan-topic /robot_1/scan --odom-topic /robot_2/odom`` built robot_1's scans along
+    robot_2's path, exit 0, unsaid (the frames robot_1/laser and robot_2/... are not linked)."""
+    bag = tmp_path / "b.bag"
+    export_rosbag(run_dir, bag, fmt="ros1")
+    with pytest.raises(InputError, match=r"the scans are in frame robot_1/\S+ but /robot_2/odom gives "
+                                         r"the pose of robot_2/\S+, another robot's.*give the pose "
+                                         r"topic of robot_1$"):
+        read_rosbag(bag, "/robot_1/scan", PoseSource(odom_topic="/robot_2/odom"))
+    read_rosbag(bag, "/robot_1/scan", PoseSource(odom_topic="/robot_1/odom"))   # its own: taken
+    assert _main(["import", "rosbag", str(bag), "--scan-topic", "/robot_1/scan", "--odom-topic",
+                  "/robot_2/odom", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "another robot's" in err and not (tmp_path / "out").exists()
