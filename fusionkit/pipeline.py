@@ -405,12 +405,14 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     if len(scans) != len(grids):
         raise InputError(f"{len(scans)} scan logs for {len(grids)} maps: give one per map (None for none)")
     names = [g.name or f"map_{k + 1}" for k, g in enumerate(grids)]
+    # a map read from a file is named as it was given, as every other error about it is
+    ref_name = os.fspath(maps[config.reference]) if grids is not maps else names[config.reference]
     if not grids[config.reference].known_mask().any():
-        raise InputError(f"{names[config.reference]}: the reference map has no known cell (all "
+        raise InputError(f"{ref_name}: the reference map has no known cell (all "
                          "unknown), so no map can be placed in its frame; choose another map as "
                          "the reference")
     if not grids[config.reference].occupied_mask().any():
-        raise InputError(f"{names[config.reference]}: the reference map has no wall (no occupied "
+        raise InputError(f"{ref_name}: the reference map has no wall (no occupied "
                          "cell), so no map can be placed in its frame; choose another map as the "
                          "reference")
     originals = list(grids)
