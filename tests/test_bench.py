@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -194,7 +195,6 @@ def test_worlds_named_with_no_folder_are_benched_alone(tmp_path, monkeypatch, ca
     """``fusionkit bench --worlds office`` run beside a ./maps folder drew its cases from every
     map there too (25 worlds from the project's folder), and said so only in passing."""
     import shutil
-    from pathlib import Path
 
     (tmp_path / "maps").mkdir()
     for ext in ("yaml", "pgm"):
@@ -273,3 +273,23 @@ def test_an_output_that_is_an_input_is_refused_and_an_input_is_never_taken_for_a
     assert {"bench.json", "bench.md", "bench_map-merge.png", "bench_walls.png", "cave.yaml"} == \
         {p.name for p in b.iterdir()}
 
+
+
+def test_an_output_folder_it_cannot_write_is_refused_before_any_case_runs(tmp_path, monkeypatch, capsys):
+    """A read-only --out was found only when the tables were written, after every case had run
+    (an hour of work lost on a large bench)."""
+    import fusionkit.bench as bench_module
+    from fusionkit import _guards
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real = _guards.os.access
+    monkeypatch.setattr(_guards.os, "access",
+                        lambda p, mode, **kw: False if Path(p) == locked else real(p, mode, **kw))
+
+    def ran(*a, **k):
+        raise AssertionError("a case was run")
+    monkeypatch.setattr(bench_module, "run_bench", ran)
+    assert main(["bench", "--worlds", "cave", "--cases", "1", "--methods", "map-merge", "--out",
+                 str(locked / "b"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is not writable" in err and not (locked / "b").exists()

@@ -94,7 +94,7 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from .._atomic import check_not_input
+    from .._atomic import check_not_input, check_out_dir
     from ..bench import (BenchConfig, find_logs, find_worlds, format_table, run_bench, summarize,
                          write_outputs)
     from ..bench.report import output_files
@@ -118,6 +118,7 @@ def run(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"{out}: exists and is not a folder; choose another --out")
+    check_out_dir(out)   # before the cases are run, not when their tables are written
     if args.cases == 0 and not args.logs:
         raise InputError("--cases 0 leaves no case to run: give --cases 1 or more, or logs to split "
                          "(--logs)")
