@@ -522,3 +522,16 @@ def test_the_odometry_of_another_robot_is_refused(run_dir, tmp_path, capsys):
                   "/robot_2/odom", "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "another robot's" in err and not (tmp_path / "out").exists()
+
+
+def test_an_export_says_which_robots_of_the_run_it_leaves_out(run_dir, tmp_path, capsys):
+    """A run where only robot_1 has its scan log was exported as robot_1 alone, unsaid."""
+    import shutil
+    part = tmp_path / "part"
+    shutil.copytree(run_dir, part)
+    (part / "robot_2.scans.npz").unlink()
+    assert _main(["export", "rosbag", str(part), "--out", str(tmp_path / "p.bag")]) == 0
+    out = capsys.readouterr().out
+    assert "not in the bag, no scan log beside their maps: robot_2" in out
+    assert _main(["export", "rosbag", str(run_dir), "--out", str(tmp_path / "w.bag")]) == 0
+    assert "not in the bag" not in capsys.readouterr().out

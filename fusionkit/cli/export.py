@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import json
 import time
+from pathlib import Path
 
 from ..errors import InputError
 from ..io_rosbag import export_rosbag
@@ -60,6 +62,20 @@ def run_rosbag(args) -> int:
     for r in res.robots:
         maps = f", {r.map_topic}" if r.map_topic else " (no map beside the scans)"
         print(f"  {r.name}: {r.scans} scans on {r.scan_topic}, {r.odom_topic}{maps}")
+    left = _robots_without_scans(Path(args.run_dir))
+    if left:
+        print(f"  not in the bag, no scan log beside their maps: {', '.join(left)}")
     print(f"wrote {res.path} ({res.format}, {res.storage}): {res.messages} messages over "
           f"{res.duration_s:.1f} s in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _robots_without_scans(run_dir: Path) -> list[str]:
+    """The robots the run's truth.json names that have no ``NAME.scans.npz`` (left out of the
+    bag, which holds scans)."""
+    try:
+        robots = json.loads((run_dir / "truth.json").read_text())["robots"]
+        names = [str(r["name"]) for r in robots]
+    except (OSError, ValueError, KeyError, TypeError):
+        return []
+    return [n for n in names if not (run_dir / f"{n}.scans.npz").is_file()]
