@@ -44,6 +44,10 @@ def test_a_group_not_linked_to_the_reference_is_reported_as_a_group(two_building
     assert d < 3 * two.a.resolution and r < math.radians(2.0)
     assert p[1].group_transform.is_close(p[1].group_transform.identity(), atol=1e-9)
     assert "group 1" in p[3].reason
+    # whose frame, said of each member as it is to it (the first map's: "its own")
+    assert p[3].reason.endswith("kept in group 1 with 1 other map, fused in the frame of map 2 of "
+                                "those given (the group's first)"), p[3].reason
+    assert p[1].reason.endswith("fused in its own frame (the group's first map)"), p[1].reason
     assert 0.0 < p[3].confidence <= 1.0
     (group,) = result.groups
     assert group.members == (1, 3)

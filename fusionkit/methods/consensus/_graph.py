@@ -296,9 +296,11 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
         if group[k] is not None:
             root = min(m for m in range(n) if group[m] == group[k])
             others = len([m for m in range(n) if group[m] == group[k]]) - 1
+            frame = ("its own frame (the group's first map)" if root == k else
+                     f"the frame of map {root + 1} of those given (the group's first)")
             reasons.append(f"no confident link joins it to the reference's maps; it is kept in "
-                           f"group {group[k]} with {others} other map(s), fused in the frame of map "
-                           f"{root + 1} as given")
+                           f"group {group[k]} with {others} other map{'s' if others != 1 else ''}, "
+                           f"fused in {frame}")
         elif any(k in e for e in demoted if e not in edges):
             reasons.append("its structure repeats (it fits another map in several places) and no "
                            "loop through a third map confirms its one fit")
