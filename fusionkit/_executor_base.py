@@ -34,9 +34,6 @@ def exit_with_parent(every: float = 0.5) -> None:
     """End this worker process when the process that started it is gone (killed with
     ``kill -9``, it can tell its workers nothing: they ran on for good, blocked writing results
     to a pipe nobody reads). A daemon thread looks every ``every`` seconds."""
-    import os
-    import threading
-
     parent = os.getppid()
 
     def watch() -> None:

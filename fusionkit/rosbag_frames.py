@@ -12,6 +12,7 @@ from collections import defaultdict, deque
 
 import numpy as np
 
+from .errors import InputError
 from .transform import wrap_angle
 
 __all__ = ["interpolate_poses"]
@@ -28,8 +29,6 @@ def _same_robot(bag, sensor_frame: str, child: str, odom_topic: str) -> None:
     """Refuse the poses of another robot: the scans' frame and the frame the pose topic locates,
     not linked by a fixed transform, under two namespaces (``robot_1/laser`` and
     ``robot_2/base_link``). Without namespaces the laser is taken to sit at the pose's frame."""
-    from .errors import InputError
-
     def robot(frame):
         parts = _frame(frame).split("/")
         return parts[0] if len(parts) > 1 else None
