@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import subprocess
 import sys
 
@@ -305,3 +306,14 @@ def test_an_upper_case_output_name_is_taken_and_an_empty_report_path_refused(tmp
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--report is empty" in err, err
     assert not (tmp_path / "m.yaml").exists()
+
+
+def test_a_map_the_papers_method_leaves_out_has_confidence_0_with_its_agreement_in_the_reason(tmp_path):
+    """Left out, robot_2 and robot_4 of this run read confidence 0.32 and 0.45 (their best
+    alignment's agreement), where every other method gives a map it leaves out 0."""
+    assert main(["run", "--robots", "5", "--poses", "200", "--out", str(tmp_path / "r")]) == 3
+    report = json.loads((tmp_path / "r" / "merged.report.json").read_text())
+    left = [m for m in report["maps"] if not m["merged"]]
+    assert left and all(m["confidence"] == 0.0 for m in left), left
+    assert all(re.search(r"best alignment agrees on \d+% of \d+ overlapping wall cells", m["reason"])
+               for m in left), left

@@ -178,7 +178,8 @@ class SpectralPSO:
             ok = score >= config.accept and cells >= config.min_overlap_cells
             steps.append(MergeStep(anchor, new, al, al.transform, score, cells, ok,
                                    int(_pair(agreements, anchor, new).count)))
-            confidence[new], overlap[new] = score, cells
+            # a map left out has confidence 0 with every method; its agreement is in its reason
+            confidence[new], overlap[new] = (score if ok else 0.0), cells
             if ok:
                 transforms[new] = al.transform
                 # the step's anchor may have been refused itself: the map is then fused onto the
