@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 from typing import Sequence
 
-__all__ = ["unique_labels", "clip_left", "fixed"]
+__all__ = ["unique_labels", "clip_left", "fixed", "count"]
 
 _MAP_SUFFIXES = (".yaml", ".yml")
 
@@ -78,3 +78,8 @@ def fixed(value: float, width: int, digits: int) -> str:
     """``value`` right-aligned in ``width`` characters with ``digits`` decimals, never "-0.0"
     (a value that rounds to zero prints as 0)."""
     return f"{round(float(value), digits) + 0.0:{width}.{digits}f}"
+
+
+def count(n: int, noun: str) -> str:
+    """``n`` and ``noun``, plural unless ``n`` is 1: ``1 case``, ``2 cases``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"

@@ -293,3 +293,10 @@ def test_an_output_folder_it_cannot_write_is_refused_before_any_case_runs(tmp_pa
                  str(locked / "b"), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is not writable" in err and not (locked / "b").exists()
+
+
+def test_one_case_on_one_world_is_said_in_the_singular(tmp_path, capsys):
+    assert main(["bench", "--worlds", "cave", "--cases", "1", "--methods", "map-merge", "--modes", "crop",
+                 "--out", str(tmp_path / "o")]) == 0
+    assert "1 case on 1 of 1 world in" in capsys.readouterr().out
+    assert "1 case (1 crop) on 1 world (cave)" in (tmp_path / "o" / "bench.md").read_text()

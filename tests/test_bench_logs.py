@@ -65,7 +65,7 @@ def test_bench_scores_the_sessions_of_a_log_alone_and_the_same_in_worker_process
     assert main(["bench", "--logs", str(OREBRO), "--cases", "0", "--robots", "2", "3",
                  "--methods", "consensus", "map-merge", "--out", str(out)]) == 0
     text = capsys.readouterr().out
-    assert "2 cases on 1 of 1 worlds" in text and "no folder given" not in text
+    assert "2 cases on 1 of 1 world in" in text and "no folder given" not in text
     rec = json.loads((out / "bench.json").read_text())
     assert [(c["world"], c["mode"], c["robots"]) for c in rec["cases"]] == [("orebro", "log", 2),
                                                                           ("orebro", "log", 3)]

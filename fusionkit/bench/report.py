@@ -16,6 +16,7 @@ import numpy as np
 from .._atomic import check_not_input, hidden_copies, recover_set, write_set
 from .._guards import _same_file
 from ..grid import OccupancyGrid
+from ..labels import count
 from ..resample import resample
 from ..transform import Transform2D
 from .config import OVERLAP_BINS
@@ -131,8 +132,8 @@ def format_markdown(result: BenchResult, summary: dict | None = None) -> str:
     lines = [
         "# fusionkit bench",
         "",
-        f"{len(result.cases)} cases ({', '.join(f'{n} {m}' for m, n in modes.items())}) on "
-        f"{len(result.worlds)} worlds ({', '.join(w.name for w in result.worlds)}); K = "
+        f"{count(len(result.cases), 'case')} ({', '.join(f'{n} {m}' for m, n in modes.items())}) on "
+        f"{count(len(result.worlds), 'world')} ({', '.join(w.name for w in result.worlds)}); K = "
         f"{', '.join(str(k) for k in cfg.robots)} maps per case; pair overlap >= {cfg.min_overlap:g}; "
         f"seed {cfg.seed}; wall time {result.seconds:.0f} s.",
         "",

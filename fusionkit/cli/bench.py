@@ -98,6 +98,7 @@ def run(args) -> int:
     from ..bench import (BenchConfig, find_logs, find_worlds, format_table, run_bench, summarize,
                          write_outputs)
     from ..bench.report import output_files
+    from ..labels import count
     from ..progress import ProgressBar
 
     folders = list(args.folders)
@@ -161,7 +162,8 @@ def run(args) -> int:
         if skipped:
             print("not used: " + "; ".join(f"{n} ({w})" for n, w in skipped))
         used = len({c["world"] for c in result.cases})
-        print(f"{len(result.cases)} cases on {used} of {len(worlds)} worlds in {result.seconds:.0f} s")
+        print(f"{count(len(result.cases), 'case')} on {used} of {count(len(worlds), 'world')} in "
+              f"{result.seconds:.0f} s")
         print(format_table(result, summary))
         print("wrote " + ", ".join(str(p) for p in paths))
     return 0
