@@ -535,3 +535,29 @@ def test_an_export_says_which_robots_of_the_run_it_leaves_out(run_dir, tmp_path,
     assert "not in the bag, no scan log beside their maps: robot_2" in out
     assert _main(["export", "rosbag", str(run_dir), "--out", str(tmp_path / "w.bag")]) == 0
     assert "not in the bag" not in capsys.readouterr().out
+
+
+def test_a_truth_json_that_is_a_pipe_does_not_hold_the_export(run_dir, tmp_path, capsys):
+    """The robots left out were read from truth.json with a plain read: a FIFO there held the
+    export for good after its bag was written."""
+    import os
+    import shutil
+    import signal
+    part = tmp_path / "part"
+    shutil.copytree(run_dir, part)
+    (part / "truth.json").unlink()
+    os.mkfifo(part / "truth.json")
+
+    class Held(BaseException):   # not an error the command or its reader could take for its own
+        pass
+
+    def expired(signum, frame):
+        raise Held("the export waited on the pipe")
+    old = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(20)
+    try:
+        assert _main(["export", "rosbag", str(part), "--out", str(tmp_path / "p.bag")]) == 0
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+    assert "not in the bag" not in capsys.readouterr().out

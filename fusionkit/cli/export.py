@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -53,6 +52,7 @@ def run_rosbag(args) -> int:
         raise InputError(f"--storage {args.storage} is for ROS 2 bags, and this one is ROS 1 "
                          f"({'--format ros1' if args.fmt else 'the output ends in .bag'}); drop "
                          f"--storage, or give a ROS 2 bag's directory name")
+    left = _robots_without_scans(Path(args.run_dir))   # read before any output is written
     progress = Progress("export")
     try:
         res = export_rosbag(args.run_dir, args.out, fmt=fmt, storage=args.storage or "sqlite3",
@@ -62,7 +62,6 @@ def run_rosbag(args) -> int:
     for r in res.robots:
         maps = f", {r.map_topic}" if r.map_topic else " (no map beside the scans)"
         print(f"  {r.name}: {r.scans} scans on {r.scan_topic}, {r.odom_topic}{maps}")
-    left = _robots_without_scans(Path(args.run_dir))
     if left:
         print(f"  not in the bag, no scan log beside their maps: {', '.join(left)}")
     print(f"wrote {res.path} ({res.format}, {res.storage}): {res.messages} messages over "
@@ -73,9 +72,11 @@ def run_rosbag(args) -> int:
 def _robots_without_scans(run_dir: Path) -> list[str]:
     """The robots the run's truth.json names that have no ``NAME.scans.npz`` (left out of the
     bag, which holds scans)."""
-    try:
-        robots = json.loads((run_dir / "truth.json").read_text())["robots"]
+    from .._inputs import read_json
+    truth = run_dir / "truth.json"
+    try:   # as every input is read: a regular file, of a bounded size (a FIFO hung the export)
+        robots = read_json(truth, "ground truth")["robots"] if truth.exists() else []
         names = [str(r["name"]) for r in robots]
-    except (OSError, ValueError, KeyError, TypeError):
+    except (InputError, OSError, KeyError, TypeError):
         return []
     return [n for n in names if not (run_dir / f"{n}.scans.npz").is_file()]
