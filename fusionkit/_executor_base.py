@@ -30,11 +30,13 @@ def worker_setup() -> None:
 _SET_UP = False
 
 
-def exit_with_parent(every: float = 0.5) -> None:
-    """End this worker process when the process that started it is gone (killed with
-    ``kill -9``, it can tell its workers nothing: they ran on for good, blocked writing results
-    to a pipe nobody reads). A daemon thread looks every ``every`` seconds."""
-    parent = os.getppid()
+def exit_with_parent(parent: int, every: float = 0.5) -> None:
+    """End this worker process when ``parent``, the process that started it (its pid, as the
+    parent gave it: one killed before this worker started is not its parent any more), is gone
+    (killed with ``kill -9``, it can tell its workers nothing: they ran on for good, blocked
+    writing results to a pipe nobody reads). A daemon thread looks every ``every`` seconds."""
+    if os.getppid() != parent:
+        os._exit(1)
 
     def watch() -> None:
         while os.getppid() == parent:

@@ -94,8 +94,8 @@ class InProcess(Executor):
             return _ordered(lambda t: pool.submit(fn, shared, t), tasks, progress, self.workers)
 
 
-def _process_init(token, shared):
-    exit_with_parent()
+def _process_init(token, shared, parent):
+    exit_with_parent(parent)
     worker_setup()
     _SHARED.clear()
     _SHARED[token] = shared
@@ -158,7 +158,7 @@ class LocalProcesses(Executor):
                 ctx = multiprocessing.get_context("spawn")
                 self._pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx,
                                                  initializer=_process_init,
-                                                 initargs=(self._token, shared))
+                                                 initargs=(self._token, shared, os.getpid()))
                 self._pool_shared = shared
             pool, token = self._pool, self._token
 

@@ -473,3 +473,21 @@ def test_workers_of_a_run_killed_with_kill_9_end_with_it():
         for pid in workers:   # stopped by their handle if the run left them
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
+
+
+def test_a_worker_whose_parent_died_before_it_started_ends_at_once():
+    """Killed 50 ms after starting its pool, the parent was gone before its workers read who
+    their parent was: they took init (pid 1) for it and ran on for good."""
+    import subprocess
+    gone = subprocess.run([sys.executable, "-c",
+                           "import os, time\n"
+                           "from fusionkit._executor_base import exit_with_parent\n"
+                           "exit_with_parent(os.getppid() + 10**6)\n"   # a parent not its own
+                           "time.sleep(60)\n"], timeout=50)
+    assert gone.returncode == 1
+    stays = subprocess.run([sys.executable, "-c",
+                            "import os\n"
+                            "from fusionkit._executor_base import exit_with_parent\n"
+                            "exit_with_parent(os.getppid())\n"
+                            "print('ran')\n"], timeout=50, capture_output=True, text=True)
+    assert stays.returncode == 0 and stays.stdout == "ran\n"
