@@ -1135,3 +1135,35 @@ def test_the_metrics_table_gives_names_told_apart_by_folder_the_room_a_wide_scre
     assert metrics_label_width(names, 120) == len("+ default/robot_1")
     assert metrics_label_width(["robot_1", "robot_2"], 200) == 12
     assert metrics_label_width(["a" * 60], 300) == 30
+
+
+async def test_the_result_is_said_earlier_by_the_readable_maps_chosen_now_and_while_it_ran(in_root):
+    """Taking away an unreadable map the merge had left out marked its result "(earlier run)";
+    a map taken away while the merge ran did not, though the export then said it had changed."""
+    other = in_root / "other"
+    other.mkdir(exist_ok=True)
+    (other / "broken.yaml").write_text("image: missing.pgm\nresolution: 0.05\n")
+    try:
+        app = make_app(["run/robot_1.yaml", "run/robot_2.yaml", "run/robot_3.yaml", "other/broken.yaml"])
+        async with app.run_test(size=(100, 32)) as pilot:
+            await ready(pilot)
+            screen = app.main
+            heading = lambda: str(screen.result_panel.query_one("#fused-heading").render())  # noqa: E731
+            await run_merge(pilot)
+            assert len(screen.result.placements) == 3 and "(earlier run)" not in heading()
+            screen.maps.toggle(Path("other/broken.yaml"))   # the maps a merge would use are the same
+            await pilot.pause()
+            assert "(earlier run)" not in heading()
+            # a map taken away while the merge runs: the result is of the maps chosen before
+            for k, v in FAST.items():
+                await type_setting(pilot, k, v)
+            screen.action_run()   # and at once, before its result can come back:
+            assert screen.merging
+            screen.maps.toggle(Path("run/robot_3.yaml"))
+            await until(pilot, lambda: not screen.merging)
+            await pilot.pause()
+            assert len(screen.result.placements) == 3
+            assert "(earlier run)" in heading()
+            assert "changed since this merge started" in str(screen.result_panel.query_one("#why").render())
+    finally:
+        (other / "broken.yaml").unlink()

@@ -245,7 +245,7 @@ class MainScreen(Screen):
             self.action_show_tab("settings")
             return
         self.merging = True
-        self._running_selection = list(self.maps.selected)
+        self._running_selection = list(maps)   # the readable maps chosen, reference first
         if self.result is not None:   # the Result tab keeps the last merge meanwhile: said so
             self.result_panel.mark_earlier(f"a merge is running; this is the merge of "
                                            f"{self.result_time}", running=True)
@@ -322,6 +322,9 @@ class MainScreen(Screen):
                        f"precision {msg.evaluation.metrics.precision:.1f} %"
         self.run_panel.finish(summary)
         self.result_panel.show(r, self.labels, msg.evaluation, msg.evaluation_error)
+        if self._selection_changed():   # changed while it ran
+            self.result_panel.mark_earlier(f"the maps chosen have changed since this merge "
+                                           f"started; it is the merge of those chosen then")
         seconds = r.seconds.get("total", 0.0)
         self.notify(f"{merged} of {len(r.placements)} maps merged in {seconds:.1f} s; e exports",
                     title="Merge done", severity="information" if r.all_merged else "warning")
@@ -336,7 +339,11 @@ class MainScreen(Screen):
         return f" (the result of the earlier merge at {self.result_time} is kept)"
 
     def _selection_changed(self) -> bool:
-        return self.result is not None and list(self.maps.selected) != self.result_selection
+        """Whether the readable maps chosen now (reference first) are not those of the result."""
+        if self.result is None:
+            return False
+        bad = self.maps.unreadable   # as a merge leaves them out
+        return [p for p in self.maps.selected if p not in bad] != self.result_selection
 
     @on(MapsPane.Changed)
     def _on_selection(self, msg: MapsPane.Changed) -> None:
@@ -385,18 +392,23 @@ class MainScreen(Screen):
         if self.result is None:
             self.notify("nothing to export yet: run a merge first (r)", severity="warning")
             return
-        note = ""
+        self.app.push_screen(ExportScreen(self.default_export_path(), output_guard(self.inputs),
+                                          note=self._export_note(), groups=len(self.result.groups)),
+                             self._export_to)
+
+    def _export_note(self) -> str:
+        """What the export dialog says of the result it writes when it is not the merge of the
+        maps chosen now ("" when it is)."""
         merged = sum(p.merged for p in self.result.placements)
         if self.last_run_outcome is not None:
-            note = (f"The last run {self.last_run_outcome}: this exports the EARLIER result, the "
+            return (f"The last run {self.last_run_outcome}: this exports the EARLIER result, the "
                     f"merge of {self.result_time} ({merged} of {len(self.result.placements)} maps "
                     f"merged).")
-        elif self._selection_changed():
-            note = (f"The maps chosen have changed since the merge of {self.result_time}: this "
+        if self._selection_changed():
+            return (f"The maps chosen have changed since the merge of {self.result_time}: this "
                     f"exports that merge ({merged} of {len(self.result.placements)} maps merged); "
                     f"escape, then r, merges the maps chosen now.")
-        self.app.push_screen(ExportScreen(self.default_export_path(), output_guard(self.inputs),
-                                          note=note, groups=len(self.result.groups)), self._export_to)
+        return ""
 
     def _export_to(self, path: str | None) -> None:
         if path is None:
@@ -414,9 +426,9 @@ class MainScreen(Screen):
                     return
                 # kept: the dialog again with the path, for another name (escape leaves), so
                 # that the keys typed next edit the path rather than run commands
-                self.app.push_screen(ExportScreen(path, output_guard(self.inputs),
-                                                  note="Those files are kept: change the path, or "
-                                                       "escape to write nothing.",
+                note = " ".join(filter(None, ["Those files are kept: change the path, or escape "
+                                              "to write nothing.", self._export_note()]))
+                self.app.push_screen(ExportScreen(path, output_guard(self.inputs), note=note,
                                                   groups=len(self.result.groups)), self._export_to)
 
             self.app.push_screen(ConfirmScreen(overwrite_question(existing)), answered)

@@ -90,7 +90,8 @@ class ResultPanel(Vertical):
         self._result = None
         self._names: list[str] = []
         self._by_robot = True
-        self._earlier = ""
+        self._earlier = ""   # " (earlier run)" in the heading, and why (None when not earlier)
+        self._earlier_why: Text | None = None
 
     def compose(self) -> ComposeResult:
         yield Label("Maps: transform into the reference frame", classes="heading")
@@ -118,7 +119,7 @@ class ResultPanel(Vertical):
         """Show ``result``; ``names`` are the input maps' names in input order (the shortest
         unique ends of their paths)."""
         self._result, self._names = result, list(names)
-        self._earlier = ""
+        self._earlier, self._earlier_why = "", None
         self._draw_map()
         table = self.query_one("#placements", DataTable)
         table.clear(columns=True)
@@ -198,14 +199,16 @@ class ResultPanel(Vertical):
             return
         self._earlier = " (earlier run)"
         hint = "" if running else "; e exports it, r runs again"
-        self.query_one("#why", Static).update(Text(why + hint, style="bold yellow"))
+        # kept over the rows' explanations (a row highlighted as the table fills came after it)
+        self._earlier_why = Text(why + hint, style="bold yellow")
+        self.query_one("#why", Static).update(self._earlier_why)
         self._draw_map()
 
     def clear_earlier(self) -> None:
         """Take back :meth:`mark_earlier`: the result shown is that of the maps chosen."""
         if self._result is None or not self._earlier:
             return
-        self._earlier = ""
+        self._earlier, self._earlier_why = "", None
         self._explain(self.query_one("#placements", DataTable).cursor_row)
         self._draw_map()
 
@@ -220,6 +223,9 @@ class ResultPanel(Vertical):
 
     def _explain(self, row: int) -> None:
         why = self.query_one("#why", Static)
+        if self._earlier_why is not None:
+            why.update(self._earlier_why)
+            return
         if self._result is None or not 0 <= row < len(self._result.placements):
             why.update("")
             return
