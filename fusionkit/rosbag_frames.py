@@ -29,14 +29,12 @@ def _same_robot(bag, sensor_frame: str, child: str, odom_topic: str) -> None:
     """Refuse the poses of another robot: the scans' frame and the frame the pose topic locates,
     not linked by a fixed transform, under two namespaces (``robot_1/laser`` and
     ``robot_2/base_link``). Without namespaces the laser is taken to sit at the pose's frame."""
-    def robot(frame):
-        parts = _frame(frame).split("/")
-        return parts[0] if len(parts) > 1 else None
-    mine, theirs = robot(sensor_frame), robot(child)
-    if mine is not None and theirs is not None and mine != theirs:
+    mine, theirs = _frame(sensor_frame).split("/")[:-1], _frame(child).split("/")[:-1]
+    n = min(len(mine), len(theirs))   # the namespaces both frames give (fleet/robot_1/...)
+    if n and mine[:n] != theirs[:n]:
         raise InputError(f"{bag}: the scans are in frame {sensor_frame} but {odom_topic} gives the "
                          f"pose of {child}, another robot's, and no /tf_static transform links "
-                         f"the two; give the pose topic of {mine}")
+                         f"the two; give the pose topic of {'/'.join(mine)}")
 
 
 def _stamp_ns(header) -> int:

@@ -561,3 +561,21 @@ def test_a_truth_json_that_is_a_pipe_does_not_hold_the_export(run_dir, tmp_path,
         signal.alarm(0)
         signal.signal(signal.SIGALRM, old)
     assert "not in the bag" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("scan, pose, refused", [
+    ("robot_1/laser", "robot_2/base_link", True),
+    ("fleet/robot_1/laser", "fleet/robot_2/base_link", True),   # namespaces within namespaces
+    ("robot_1/laser", "robot_1/base_link", False),
+    ("/tb3_0/base_scan", "tb3_0/base_footprint", False),
+    ("robot_1/laser", "robot_1/chassis/base_link", False),
+    ("laser", "base_link", False),                                # no namespace: the laser sits there
+    ("robot_1/laser", "base_link", False),
+])
+def test_a_pose_frame_is_refused_only_under_another_robots_namespace(scan, pose, refused):
+    from fusionkit.rosbag_frames import _same_robot
+    if refused:
+        with pytest.raises(InputError, match="another robot's"):
+            _same_robot("b.bag", scan, pose, "/odom")
+    else:
+        _same_robot("b.bag", scan, pose, "/odom")
