@@ -300,3 +300,21 @@ def test_one_case_on_one_world_is_said_in_the_singular(tmp_path, capsys):
                  "--out", str(tmp_path / "o")]) == 0
     assert "1 case on 1 of 1 world in" in capsys.readouterr().out
     assert "1 case (1 crop) on 1 world (cave)" in (tmp_path / "o" / "bench.md").read_text()
+
+
+def test_worlds_naming_none_benches_the_folders_alone_and_says_so(tmp_path, monkeypatch, capsys):
+    """``--worlds`` with no name said "..., and the built-in worlds" and benched none of them;
+    with no ./maps it failed on "(no folder given)"."""
+    import shutil
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--worlds", "--cases", "1", "--out", "o"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--worlds names no world" in err
+    (tmp_path / "maps").mkdir()
+    for ext in ("yaml", "pgm"):
+        shutil.copy(Path(__file__).parents[1] / "maps" / f"cave.{ext}", tmp_path / "maps")
+    assert main(["bench", "--worlds", "--cases", "1", "--methods", "map-merge", "--modes", "crop",
+                 "--out", "o"]) == 0
+    out = capsys.readouterr().out
+    assert "no folder given: the maps of ./maps\n" in out
+    assert [c["world"] for c in json.loads((tmp_path / "o" / "bench.json").read_text())["cases"]] == ["cave"]

@@ -110,6 +110,9 @@ def run(args) -> int:
             from ..worlds import WORLDS
             builtin = list(WORLDS)
     builtin = builtin or []
+    if defaulted and not folders and not builtin and args.cases > 0:   # `--worlds` naming none
+        raise InputError("--worlds names no world and no folder of maps is given (no ./maps here): "
+                         "name built-in worlds after --worlds, or give folders of maps")
     config = BenchConfig(methods=tuple(args.methods), modes=tuple(args.modes), robots=tuple(args.robots),
                          cases=args.cases, min_overlap=args.min_overlap, max_overlap=args.max_overlap,
                          poses=args.poses, range_noise=args.range_noise, drift=args.drift,
@@ -145,7 +148,7 @@ def run(args) -> int:
     if defaulted and use_maps and not args.quiet:
         # the default folders are relative to where the command runs: say what was found
         print("no folder given: the maps of " + " and ".join(f"./{f}" for f in folders)
-              + ", and the built-in worlds" if folders else
+              + (", and the built-in worlds" if builtin else "") if folders else
               "no folder given, and no ./maps or ./maps/real here: the built-in worlds only "
               "(give folders of maps to bench on them)", flush=True)
     command = "fusionkit bench " + " ".join(shlex.quote(a) for a in sys.argv[2:]) \
