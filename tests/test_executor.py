@@ -423,7 +423,8 @@ import os, sys, time
 from fusionkit.executor import LocalProcesses
 from test_executor import _pid_then_wait
 ex = LocalProcesses(2)
-print(*sorted(set(ex.map(_pid_then_wait, [0.3, 0.3, 0.3, 0.3]))), flush=True)
+ex.map(_pid_then_wait, [0.3, 0.3, 0.3, 0.3])
+print(*sorted(ex._pool._processes), flush=True)   # the pool's two workers, busy or not
 ex.map(_pid_then_wait, [60.0] * 4)
 """
 
