@@ -90,7 +90,8 @@ class ResultPanel(Vertical):
         self._result = None
         self._names: list[str] = []
         self._by_robot = True
-        self._earlier = ""   # " (earlier run)" in the heading, and why (None when not earlier)
+        #: why the result shown is an earlier one (None when it is not): said under the table
+        #: and as " (earlier run)" in the heading
         self._earlier_why: Text | None = None
 
     def compose(self) -> ComposeResult:
@@ -119,7 +120,7 @@ class ResultPanel(Vertical):
         """Show ``result``; ``names`` are the input maps' names in input order (the shortest
         unique ends of their paths)."""
         self._result, self._names = result, list(names)
-        self._earlier, self._earlier_why = "", None
+        self._earlier_why = None
         self._draw_map()
         table = self.query_one("#placements", DataTable)
         table.clear(columns=True)
@@ -190,14 +191,14 @@ class ResultPanel(Vertical):
         r = self._result
         merged = sum(p.merged for p in r.placements)
         return (f"Fused map ({r.config.method}): {merged} of {len(r.placements)} maps, "
-                f"{r.grid.cols}x{r.grid.rows} cells{self._earlier}")
+                f"{r.grid.cols}x{r.grid.rows} cells"
+                f"{' (earlier run)' if self._earlier_why is not None else ''}")
 
     def mark_earlier(self, why: str, *, running: bool = False) -> None:
         """Say that the result shown is an earlier one: the last run was cancelled or failed,
         or (``running``) one is running."""
         if self._result is None:
             return
-        self._earlier = " (earlier run)"
         hint = "" if running else "; e exports it, r runs again"
         # kept over the rows' explanations (a row highlighted as the table fills came after it)
         self._earlier_why = Text(why + hint, style="bold yellow")
@@ -206,9 +207,9 @@ class ResultPanel(Vertical):
 
     def clear_earlier(self) -> None:
         """Take back :meth:`mark_earlier`: the result shown is that of the maps chosen."""
-        if self._result is None or not self._earlier:
+        if self._result is None or self._earlier_why is None:
             return
-        self._earlier, self._earlier_why = "", None
+        self._earlier_why = None
         self._explain(self.query_one("#placements", DataTable).cursor_row)
         self._draw_map()
 
