@@ -28,6 +28,7 @@ RGB, RGBA; 8- or 16-bit).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import re
@@ -53,6 +54,21 @@ IMAGE_FORMATS = ("pgm", "png")
 _SAVE_OCCUPIED_THRESH = 0.65
 _SAVE_FREE_THRESH = 0.196
 _PIXEL_OCCUPIED, _PIXEL_FREE, _PIXEL_UNKNOWN = 0, 254, 205
+
+
+@contextlib.contextmanager
+def _named_by(yaml_path: Path, image: Path):
+    """A fault of a map's image named by the map's YAML too: among several maps given, the YAML
+    is the file the user named, and an image may be shared or named by mistake (another map's
+    YAML)."""
+    try:
+        yield
+    except MapFormatError as exc:
+        message = str(exc)
+        for name in (str(image), _short(image)):
+            if message.startswith(name + ": "):
+                raise MapFormatError(f"{yaml_path}: its image {message}") from None
+        raise
 
 
 # ---------------------------------------------------------------------------------------------
@@ -96,7 +112,8 @@ def load_map(yaml_path) -> OccupancyGrid:
         raise MapFormatError(
             f"{yaml_path}: the image {meta.image} it names does not exist; fix the 'image' key or "
             f"restore the file")
-    pixels, maxval = _read_pixels(meta.image)
+    with _named_by(yaml_path, meta.image):
+        pixels, maxval = _read_pixels(meta.image)
     cells = _pixels_to_cells(pixels, maxval, meta)
     data = np.ascontiguousarray(cells[::-1])  # image top row = highest y; grid row 0 = lowest y
     return OccupancyGrid(data, meta.resolution, meta.origin, yaml_path.stem)
@@ -130,7 +147,8 @@ def map_info(yaml_path) -> dict:
         raise MapFormatError(
             f"{yaml_path}: the image {meta.image} it names does not exist; fix the 'image' key or "
             f"restore the file")
-    header, _ = _image_header(meta.image)
+    with _named_by(yaml_path, meta.image):
+        header, _ = _image_header(meta.image)
     return {
         "name": yaml_path.stem,
         "yaml": str(yaml_path),

@@ -481,6 +481,9 @@ def _bad_cases():
          "m.png", "checksum"),
         ("png without IHDR", image(b"\x89PNG\r\n\x1a\n" + bytes(30), "m.png"), "m.png", "IHDR"),
         ("huge png dims", image(huge_png, "m.png"), "m.png", str(MAX_CELLS)),
+        ("image is another map's yaml",
+         lambda d: (write_map(d, "other", GOOD), write_map(d, "m", GOOD, image="other.yaml"))[1],
+         "other.yaml", "a map YAML, not an image"),
     ]
 
 
@@ -498,6 +501,23 @@ def test_bad_input_gives_one_clear_error(tmp_path, build, filename, needle):
     assert "\n" not in message
     assert info.value.__cause__ is None  # no chained deep traceback
     assert info.value.__suppress_context__ or info.value.__context__ is None
+
+
+@pytest.mark.parametrize("build", [c[1] for c in BAD if c[2] not in ("m.yaml", "nothing.yaml", "dir.yaml")
+                                   and c[0] != "yaml is an image"],
+                         ids=[c[0] for c in BAD if c[2] not in ("m.yaml", "nothing.yaml", "dir.yaml")
+                              and c[0] != "yaml is an image"])
+def test_a_fault_of_the_image_names_the_map_yaml_first(tmp_path, build):
+    """Among several maps given, the user named the YAML: the line starts with it, whichever
+    file is at fault."""
+    path = build(tmp_path)
+    with pytest.raises(MapFormatError) as info:
+        load_map(path)
+    assert str(info.value).startswith(str(path) + ":")
+    try:
+        map_info(path)                      # reads the header only: a bad raster passes it
+    except MapFormatError as exc:
+        assert str(exc).startswith(str(path) + ":")
 
 
 def test_map_info_reports_the_same_errors(tmp_path):
