@@ -243,6 +243,24 @@ def test_a_merge_never_writes_over_the_ground_truth_of_the_inputs_run(tmp_path, 
                  str(tmp_path / "m.yaml"), "--report", str(run / "truth.json")]) == 2
     assert "ground truth" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in run.iterdir()} == before
+    # nor a robot's scan log (robot_3, not merged): the next merge of that robot would fail
+    from fusionkit.cli.merge import OutputGuard
+    with pytest.raises(InputError, match="ground truth of the inputs' run"):
+        OutputGuard.of([run / "robot_1.yaml", run / "robot_2.yaml"]).check([run / "robot_3.scans.npz"])
+
+
+@pytest.mark.parametrize("name", ["other.scans.npz", "other.yaml", "other.pgm"])
+def test_a_report_named_like_a_map_or_a_scan_log_is_refused_before_any_work(tmp_path, capsys, name):
+    run = tmp_path / "run"
+    assert main(["simulate", "--robots", "2", "--poses", "40", "--out", str(run), "--quiet"]) == 0
+    target = tmp_path / name
+    target.write_bytes(b"keep me")
+    assert main(["merge", str(run / "robot_1.yaml"), str(run / "robot_2.yaml"), "-o",
+                 str(tmp_path / "m.yaml"), "--report", str(target)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "ending in .json" in err[0], err
+    assert target.read_bytes() == b"keep me"
+    assert not (tmp_path / "m.yaml").exists()
 
 
 def test_a_new_run_into_a_folder_takes_the_merges_of_the_old_robots_with_them(tmp_path, capsys):

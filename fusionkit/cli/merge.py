@@ -62,6 +62,10 @@ def run(args) -> int:
         raise InputError("--report is empty: give the report's path, or leave --report out for "
                          f"{out.stem}.report.json beside the map")
     report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
+    if report_path.suffix.lower() in (".yaml", ".yml", ".pgm", ".png", ".npz"):
+        # a map's or a scan log's name: most likely a slip, and the file it names would be lost
+        raise InputError(f"--report {show(str(report_path), 200)}: the report is JSON; give it a name "
+                         f"ending in .json (e.g. {out.stem}.report.json)")
     image_path = out.with_suffix(".pgm")
     if len(args.maps) < 2:
         raise InputError("give at least two maps to merge")
@@ -187,9 +191,11 @@ TRUTH_FILE = "a file of the ground truth of the inputs' run,"
 def run_truth(inputs) -> list[Path]:
     """The ground truth of each run an input map stands in (a ``truth.json`` beside it): that
     file, the world map it names and the run's robot maps, with their images. A merge written
-    over one of them would spoil the run's evaluation (``fusionkit evaluate``)."""
+    over one of them would spoil the run's evaluation (``fusionkit evaluate``), over a robot's
+    scan log the next merge of that robot."""
     from ..errors import FusionkitError
     from ..mapio import _protected
+    from ..scanlog import scans_path_for
     from .evaluate import _map_of, read_truth
 
     out: list[Path] = []
@@ -202,7 +208,8 @@ def run_truth(inputs) -> list[Path]:
             t = read_truth(truth)
         except (FusionkitError, OSError):
             continue  # not a run's truth after all: only the file itself is kept
-        out += _protected([t.world, *(_map_of(t, name) for name in t.robots)])
+        robots = [_map_of(t, name) for name in t.robots]
+        out += _protected([t.world, *robots]) + [scans_path_for(m) for m in robots]
     return out
 
 
