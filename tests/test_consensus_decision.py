@@ -161,9 +161,11 @@ def test_the_risk_is_one_user_number_checked_on_the_command_line(intel_crop, tmp
     save_map(intel_crop.a, tmp_path / "a.yaml")
     save_map(intel_crop.b, tmp_path / "b.yaml")
     args = ["merge", str(tmp_path / "a.yaml"), str(tmp_path / "b.yaml"), "-o", str(tmp_path / "m.yaml")]
-    with pytest.raises(SystemExit) as exc:
-        main(args + ["--max-false-merge", "0", "--quiet"])
-    assert exc.value.code == 2 and "max-false-merge" in capsys.readouterr().err
+    for bad in ("0", "1"):   # the parser, --help and the check behind them give one range
+        with pytest.raises(SystemExit) as exc:
+            main(args + ["--max-false-merge", bad, "--quiet"])
+        err = capsys.readouterr().err
+        assert exc.value.code == 2 and "max-false-merge" in err and "must be > 0 and < 1" in err, err
     assert main(args + ["--max-false-merge", "0.001", "--quiet"]) == 0
     with pytest.raises(InputError):
         MergeConfig(max_false_merge=1.0)

@@ -62,16 +62,17 @@ def int_range(lo: int, hi: int):
     return parse
 
 
-def float_range(lo: float, hi: float, *, lo_open: bool = False):
-    """argparse type: a float in ``[lo, hi]`` (or ``(lo, hi]`` with ``lo_open``)."""
+def float_range(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False):
+    """argparse type: a float in ``[lo, hi]`` (``lo_open``, ``hi_open``: that end left out)."""
     def parse(text: str) -> float:
         try:
             v = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-        if not (v > lo if lo_open else v >= lo) or not v <= hi:
+        if not (v > lo if lo_open else v >= lo) or not (v < hi if hi_open else v <= hi):
             raise argparse.ArgumentTypeError(
-                f"must be {'>' if lo_open else '>='} {lo:g} and <= {hi:g}, got {v:g}")
+                f"must be {'>' if lo_open else '>='} {lo:g} and {'<' if hi_open else '<='} {hi:g}, "
+                f"got {v:g}")
         return v
     return parse
 
@@ -89,11 +90,11 @@ def add_merge_options(p, method: str | None = None, *, seed_flag: str = "--seed"
                         f"maps, refused when unsure; spectral-pso: the paper's DFT + Pearson + PSO "
                         f"(the settings below are its own); map-merge, map-merge-shipped, "
                         f"hough-spectrum, fourier-mellin: the classic peers")
-    g.add_argument("--max-false-merge", type=float_range(0, 1, lo_open=True), default=d.max_false_merge,
+    g.add_argument("--max-false-merge", type=float_range(0, 1, lo_open=True, hi_open=True), default=d.max_false_merge,
                    metavar="RISK",
                    help=f"consensus: the false-merge risk accepted, the expected number of wrong "
                         f"placements that would fit as well as one accepted (default "
-                        f"{d.max_false_merge:g}; smaller is safer and merges less)")
+                        f"{d.max_false_merge:g}; above 0 and below 1, smaller is safer and merges less)")
     g.add_argument(seed_flag, dest="seed", type=int_range(0, 2**63 - 1), default=d.seed,
                    help=f"seed of every random step{' of the merge' if seed_flag != '--seed' else ''} "
                         f"(default {d.seed})")
