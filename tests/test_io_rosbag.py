@@ -353,7 +353,9 @@ def test_cli_export_and_import(run_dir, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("case", ["topic", "bag", "export_exists", "export_ros1_name",
-                                  "export_ros1_storage", "export_ros1_format_storage"])
+                                  "export_ros1_storage", "export_ros1_format_storage",
+                                  "export_past_2_31_ros1", "export_past_2_31_ros2",
+                                  "export_late_start"])
 def test_cli_bad_input_exits_2_with_one_line(run_dir, tmp_path, capsys, case):
     bag = tmp_path / "b"
     export_rosbag(run_dir, bag)
@@ -371,6 +373,13 @@ def test_cli_bad_input_exits_2_with_one_line(run_dir, tmp_path, capsys, case):
         "export_ros1_format_storage": ["export", "rosbag", str(run_dir), "--out",
                                        str(tmp_path / "x.bag"), "--format", "ros1",
                                        "--storage", "sqlite3"],
+        # each option in its range, the last scan's stamp past what a message holds (a traceback)
+        "export_past_2_31_ros1": ["export", "rosbag", str(run_dir), "--out", str(tmp_path / "x.bag"),
+                                  "--rate", "1e-9"],
+        "export_past_2_31_ros2": ["export", "rosbag", str(run_dir), "--out", str(tmp_path / "x"),
+                                  "--rate", "1e-9"],
+        "export_late_start": ["export", "rosbag", str(run_dir), "--out", str(tmp_path / "x"),
+                              "--start", "2147483647", "--rate", "1"],
     }[case]
     assert _main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
@@ -381,6 +390,9 @@ def test_cli_bad_input_exits_2_with_one_line(run_dir, tmp_path, capsys, case):
     assert not (tmp_path / "x.bag").exists()
     if case.endswith("storage"):
         assert "--storage" in err[0] and "ROS 1" in err[0]
+    if case.startswith("export_past") or case == "export_late_start":
+        assert "2^31 s" in err[0] and "higher rate or an earlier start" in err[0], err
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]   # no temporary left
 
 
 def test_cli_export_on_a_full_disk_is_one_line_and_leaves_nothing(run_dir, tmp_path, capsys,
