@@ -121,6 +121,7 @@ class DaskExecutor(Executor):
         self._shared_of = None
         if address is not None:
             _check_address(address)
+            _probe(address, float(timeout))
             try:
                 self._client = Client(address, timeout=f"{float(timeout)}s", set_as_default=False)
             except (OSError, TimeoutError) as exc:
@@ -291,8 +292,44 @@ class DaskExecutor(Executor):
             log.setLevel(level)
 
 
-#: The schemes a Dask scheduler listens on
-_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+#: The schemes of the schedulers fusionkit connects to (a tls:// or wss:// one needs
+#: certificates, which it does not take; ucx:// needs UCX)
+_SCHEMES = ("tcp", "ws")
+
+
+def _probe(address: str, timeout: float) -> None:
+    """Ask the scheduler at ``address`` who it is, all within ``timeout`` seconds: a port that
+    takes the connection and never answers (the dashboard's, given as tcp://) held Dask's
+    client for good. Run in a thread of its own, so that a caller's running event loop (a
+    notebook's) is not in the way."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from distributed.comm import connect
+
+    async def ask():
+        comm = await connect(address, timeout=timeout)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def run():
+        return asyncio.run(asyncio.wait_for(ask(), timeout))
+
+    with ThreadPoolExecutor(1) as pool:
+        try:
+            answer = pool.submit(run).result()
+        except (TimeoutError, asyncio.TimeoutError):
+            raise InputError(f"the Dask scheduler at {address} did not answer within {timeout:g} s; "
+                             f"check the address (the scheduler's port, 8786 by default, not the "
+                             f"dashboard's) and that the scheduler is running") from None
+        except Exception as exc:   # refused, reset, closed: Dask's comm errors are OSErrors or not
+            raise InputError(f"no Dask scheduler answered at {address} ({type(exc).__name__}); check "
+                             f"the address and that the scheduler is running") from None
+    if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+        raise InputError(f"{address} answers, but not as a Dask scheduler; give the scheduler's "
+                         f"address (tcp://HOST:8786 by default)")
 
 
 def _check_address(address) -> None:
@@ -310,7 +347,10 @@ def _check_address(address) -> None:
         raise InputError(f"{fix} (the port is a number from 1 to 65535)") from None
     if parts.scheme not in _SCHEMES:
         hint = " (http is the dashboard's; the scheduler's own port is 8786 by default)" \
-            if parts.scheme in ("http", "https") else ""
+            if parts.scheme in ("http", "https") else \
+            f" ({parts.scheme}:// is not supported: a tls:// or wss:// scheduler needs certificates " \
+            f"fusionkit does not take, ucx:// needs UCX; start the scheduler with tcp://)" \
+            if parts.scheme in ("tls", "wss", "ucx") else ""
         raise InputError(f"{fix}{hint}")
     if not parts.hostname or port == 0 or parts.path not in ("", "/"):
         raise InputError(fix)

@@ -254,8 +254,51 @@ def test_a_scheduler_that_does_not_answer_is_one_clear_error_line(tmp_path, caps
         make_executor(scheduler="127.0.0.1:1")
 
 
+@pytest.mark.parametrize("server", ["silent", "http"])
+def test_a_port_that_takes_the_connection_and_never_answers_is_one_line_within_the_timeout(
+        tmp_path, capsys, server):
+    """The dashboard's port given as tcp:// (an HTTP server waiting for the rest of a request),
+    or any silent listener: the command hung for good, and Ctrl-C then printed a traceback."""
+    import http.server
+    import threading
+
+    if server == "http":
+        class Quiet(http.server.BaseHTTPRequestHandler):
+            def log_message(self, *args):
+                pass
+
+        srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Quiet)
+        port = srv.server_address[1]
+        thread = threading.Thread(target=srv.serve_forever, daemon=True)
+        thread.start()
+        stop = srv.shutdown
+        close = srv.server_close
+    else:
+        lsock = socket.socket()
+        lsock.bind(("127.0.0.1", 0))
+        lsock.listen(8)
+        port = lsock.getsockname()[1]
+        stop, close = (lambda: None), lsock.close
+    address = f"tcp://127.0.0.1:{port}"
+    try:
+        t0 = time.monotonic()
+        with deadline(60):
+            code = main(["bench", "--worlds", "cave", "--cases", "1", "--out", str(tmp_path / "b"),
+                         "--scheduler", address, "--scheduler-timeout", "2"])
+        took = time.monotonic() - t0
+    finally:
+        stop()
+        close()
+    assert code == 2
+    assert took < 20, took
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and address in err[0] and "within 2 s" in err[0], err
+    assert not (tmp_path / "b").exists()
+
+
 @pytest.mark.parametrize("address", ["http://127.0.0.1:8787", "tcp://", "tcp://:8786",
-                                     "tcp://127.0.0.1:99999", "tcp://127.0.0.1:port"])
+                                     "tcp://127.0.0.1:99999", "tcp://127.0.0.1:port",
+                                     "tls://127.0.0.1:8786", "ucx://127.0.0.1:8786"])
 def test_a_scheduler_address_dask_cannot_use_is_one_line_and_exit_2(tmp_path, capsys, address):
     """The dashboard's http://HOST:8787, an easy slip, or tcp:// with no host gave two
     tracebacks and exit 1."""
