@@ -22,7 +22,8 @@ def _answers(url: str, timeout: float = 2.0) -> bool:
 
     try:
         with urllib.request.urlopen(url, timeout=timeout) as r:   # noqa: S310 - the user's scheduler
-            return 200 <= r.status < 400
+            # a scheduler without bokeh serves a page that says the dashboard needs it
+            return 200 <= r.status < 400 and b"needs bokeh" not in r.read(4096)
     except (urllib.error.URLError, OSError, ValueError):
         return False
 
@@ -38,7 +39,8 @@ class _NotCancelled(logging.Filter):
 def _quiet_dask() -> None:
     """Stopped by Ctrl-C or SIGTERM, the run ends with its one line: what the scheduler and
     its event loop log of the tasks and transfers cut short (errors, tracebacks) is not said."""
-    for name in ("distributed", "asyncio", "tornado"):
+    for name in ("distributed", "distributed.client", "asyncio", "tornado"):   # (the client's
+        # level is set apart by Dask's configuration)
         logging.getLogger(name).setLevel(logging.CRITICAL + 1)
 
 
@@ -213,6 +215,7 @@ class DaskExecutor(Executor):
 
     def map(self, fn, tasks, *, shared=None, progress=None):
         from distributed import as_completed
+        from distributed.client import FutureCancelledError
         tasks = list(tasks)
         total = len(tasks)
         if progress is not None:
@@ -238,8 +241,16 @@ class DaskExecutor(Executor):
                 done += 1
                 if progress is not None:
                     progress(done, total)
+        except FutureCancelledError as exc:
+            if "connection" not in str(exc.reason):
+                raise
+            _quiet_dask()   # the client's reconnection, cut short by the close, is not said
+            raise InputError(f"the Dask scheduler at {client.scheduler.address} was lost after "
+                             f"{done} of {total} tasks ({exc.reason}); nothing was written: check "
+                             f"the scheduler and run again") from None
         finally:
-            client.cancel(futures)
+            with contextlib.suppress(Exception):   # nothing to cancel on a scheduler gone
+                client.cancel(futures)
         return out
 
     def _drop_shared(self) -> None:
@@ -281,9 +292,11 @@ class DaskExecutor(Executor):
         # cluster to Dask's exit hook, which closed it seconds later
         try:
             with deferred():
-                self._drop_shared()
+                with contextlib.suppress(Exception):   # a scheduler lost: nothing to drop
+                    self._drop_shared()
                 if self._client is not None:
-                    self._client.close()
+                    with contextlib.suppress(Exception):   # (TimeoutError, a scheduler lost)
+                        self._client.close(timeout=5)
                     self._client = None
                 if self._cluster is not None:
                     self._cluster.close()

@@ -428,28 +428,26 @@ def test_ctrl_c_while_the_dask_cluster_starts_stops_the_run(tmp_path):
     assert not left, "a process of the run outlived it by 10 s"
 
 
-def test_a_scheduler_without_dashboard_pages_is_said_to_have_none(tmp_path):
-    """A scheduler started with --no-dashboard (or without bokeh) still serves its HTTP port;
-    the line said "dashboard: http://127.0.0.1:8787/status", a page that answers 404."""
+@contextlib.contextmanager
+def _external_cluster(tmp_path, *scheduler_args, workers: int = 1):
+    """A scheduler and a worker on loopback, started as a user starts them; yields the
+    scheduler's port and process. Both are stopped by their handles at the end."""
+    import os
     import subprocess
+    from pathlib import Path
 
-    port, http = _free_port(), _free_port()
-    dask = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
-    procs = [subprocess.Popen(dask + ["--host", "127.0.0.1", "--port", str(port), "--no-dashboard",
-                                      "--dashboard-address", f"127.0.0.1:{http}"],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path)]
+    port = _free_port()
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).parent))   # the tasks of this file
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
+                                  "127.0.0.1", "--port", str(port), *scheduler_args],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path, env=env)
+    procs = [scheduler]
     try:
         procs.append(subprocess.Popen(
             [sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
-             "--host", "127.0.0.1", "--nthreads", "1", "--no-dashboard"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path))
-        with deadline(120):
-            ex = DaskExecutor(address=f"tcp://127.0.0.1:{port}", timeout=60)
-            try:
-                assert ex.dashboard is None
-                assert ex.describe().endswith("dashboard: none (install bokeh for one)")
-            finally:
-                ex.close()
+             "--host", "127.0.0.1", "--nworkers", str(workers), "--nthreads", "1", "--no-dashboard"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path, env=env))
+        yield port, scheduler
     finally:
         for p in procs:
             p.terminate()
@@ -459,6 +457,46 @@ def test_a_scheduler_without_dashboard_pages_is_said_to_have_none(tmp_path):
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait(10)
+
+
+@pytest.mark.parametrize("pages", ["--no-dashboard", "without bokeh"])
+def test_a_scheduler_without_dashboard_pages_is_said_to_have_none(tmp_path, pages):
+    """A scheduler started with --no-dashboard still serves its HTTP port; the line said
+    "dashboard: http://127.0.0.1:8787/status", a page that answers 404. Without bokeh, that
+    page answers 200 and says the dashboard needs bokeh: the link was printed too."""
+    http = _free_port()
+    args = ["--dashboard-address", f"127.0.0.1:{http}"] + (["--no-dashboard"] if pages == "--no-dashboard" else [])
+    with _external_cluster(tmp_path, *args) as (port, _):
+        with deadline(120):
+            ex = DaskExecutor(address=f"tcp://127.0.0.1:{port}", timeout=60)
+            try:
+                assert ex.dashboard is None
+                assert ex.describe().endswith("dashboard: none (install bokeh for one)")
+            finally:
+                ex.close()
+
+
+def test_a_scheduler_lost_mid_run_is_one_clear_error_and_a_prompt_close(tmp_path, capfd):
+    """A scheduler that went away mid-run gave 53 lines of tracebacks and exit 1."""
+    with _external_cluster(tmp_path, "--no-dashboard", workers=2) as (port, scheduler):
+        with deadline(120):
+            ex = DaskExecutor(address=f"tcp://127.0.0.1:{port}", timeout=60)
+            capfd.readouterr()
+
+            def lose_it(done, total):
+                if done == 1:
+                    scheduler.terminate()
+
+            try:
+                with pytest.raises(InputError, match="was lost after 1 of 12 tasks"):
+                    ex.map(_pid_then_wait, [0.2] + [3.0] * 11, progress=lose_it)
+            finally:
+                t0 = time.monotonic()
+                ex.close()
+                closed = time.monotonic() - t0
+    assert closed < 10, closed
+    err = capfd.readouterr().err
+    assert "Traceback" not in err and "ERROR" not in err, err
 
 
 _KILLED = """
