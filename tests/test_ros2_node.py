@@ -51,7 +51,8 @@ BAD_PUBLISHER = textwrap.dedent("""
 
 SEQUENCE_PUBLISHER = textwrap.dedent("""
     # python -c SCRIPT ROBOT=MAP@SECONDS ...: publish each MAP (a map YAML, or "unknown" for an
-    # all-unknown 200 x 200 grid, "free" for an all-free one, or "none": the topic only) latched
+    # all-unknown 200 x 200 grid, "free" for an all-free one, "short" for a free one whose data
+    # lacks 7 cells, or "none": the topic only) latched
     # on /ROBOT/map, SECONDS
     # after the start, in that order
     import sys, time
@@ -70,12 +71,12 @@ SEQUENCE_PUBLISHER = textwrap.dedent("""
         robot, rest = arg.split("=", 1)
         path, at = rest.rsplit("@", 1)
         grid = (fk.OccupancyGrid(np.full((200, 200), -1 if path == "unknown" else 0, np.int8), 0.1,
-                                 (0.0, 0.0, 0.0), robot) if path in ("unknown", "free")
+                                 (0.0, 0.0, 0.0), robot) if path in ("unknown", "free", "short")
                 else None if path == "none" else fk.load_map(path))
-        steps.append((float(at), robot, grid))
+        steps.append((float(at), robot, grid, path == "short"))
     pubs, t0 = {}, time.monotonic()
     try:
-        for at, robot, grid in sorted(steps, key=lambda s: s[0]):
+        for at, robot, grid, short in sorted(steps, key=lambda s: s[0]):
             time.sleep(max(0.0, t0 + at - time.monotonic()))
             if robot not in pubs:
                 pubs[robot] = node.create_publisher(OccupancyGrid, f"/{robot}/map", qos)
@@ -83,6 +84,8 @@ SEQUENCE_PUBLISHER = textwrap.dedent("""
                 continue
             msg = OccupancyGrid()
             fill_msg(msg, grid, f"{robot}/map", node.get_clock().now().to_msg())
+            if short:
+                msg.data = msg.data[:-7]
             pubs[robot].publish(msg)
             print("published", robot, at, flush=True)
         while True:
@@ -482,14 +485,16 @@ def test_a_parameter_the_node_does_not_know_is_said_once_and_ignored(procs):
     assert "use_sim_time" not in log
 
 
-def test_a_reference_robot_whose_map_has_not_come_is_not_said_placed(procs, run3, tmp_path):
+@pytest.mark.parametrize("sent", ["none", "short"])
+def test_a_reference_robot_whose_map_has_not_come_is_not_said_placed(procs, run3, tmp_path, sent):
     """The status said the reference robot was placed (confidence 1) while no map of it had
-    arrived, so nothing of it was in the merged map."""
+    arrived, so nothing of it was in the merged map. A map refused (data short of its size)
+    was said to hold no known cell."""
     probe_out = tmp_path / "probe.jsonl"
     _probe(procs, probe_out, "robot_1", "robot_2")
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
                                       "-p", "reference_robot:=/robot_1"])
-    procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER, "robot_1=none@0",
+    procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER, f"robot_1={sent}@0",
                         f"robot_2={run3 / 'robot_2.yaml'}@0"])
 
     def both():
@@ -501,7 +506,11 @@ def test_a_reference_robot_whose_map_has_not_come_is_not_said_placed(procs, run3
     assert procs.stop("pub") == 0 and procs.stop("node") == 0
     r1 = status["robots"]["/robot_1"]
     assert r1["placed"] is False and r1["map"] is None
-    assert r1["reason"] == "no valid map received yet"
+    if sent == "none":
+        assert r1["reason"] == "no valid map received yet" and r1["problem"] is None
+    else:
+        assert r1["problem"] and "width x height" in r1["problem"], r1
+        assert r1["reason"] == f"no valid map received yet ({r1['problem']})", r1
 
 
 def test_a_map_that_changes_nothing_merged_does_not_send_the_merged_map_again(procs, run3,

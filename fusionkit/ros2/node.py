@@ -96,7 +96,7 @@ class MergeNode:
         except Exception:  # noqa: BLE001 - absent or broken tf2: the topics say it all
             self.tf = None
         mode = ("known initial poses" if settings.known_init_poses else
-                f"method {settings.method}, estimation every {1 / settings.estimation_rate:.1f} s")
+                f"method {settings.method}, estimation every {1 / settings.estimation_rate:.3g} s")
         self.log.info(f"map merging started: robots' '{settings.robot_map_topic}' topics into "
                       f"{self.merged_topic} (frame {settings.world_frame}), {mode}")
         for robot, what in sorted(settings.partial_init_poses.items()):   # said once, here
@@ -305,7 +305,7 @@ class MergeNode:
         for name, r in items:
             held = self.tracker.held(name)
             waiting = r.grid is None   # its place may be known (the reference), its map is not
-            why = ("no valid map received yet" if waiting and not r.problem else
+            why = (f"no valid map received yet{f' ({r.problem})' if r.problem else ''}" if waiting else
                    r.last_why or (f"waiting for the reference robot {self.reference}'s map with a "
                                   f"wall" if no_ref and held is None else
                                   "its map holds no known cell yet" if not r.known else

@@ -105,11 +105,11 @@ def play(run_dir, *, duration: float, steps: int, topic: str = "map", hold: floa
     for r in robots:
         check_topic(f"{r.name}.yaml (its name is the robot's topic namespace)", f"/{r.name}/{topic.strip('/')}")
 
-    log(f"building {steps} map steps for each of {len(robots)} robots")
-    plans = []
-    for r in robots:
-        plans.append((r, growth_steps(r, steps)))
+    from ..labels import count
+    # the ROS arguments are checked (and refused) before the maps are built
     with ros_context(["fusionkit-play", "--ros-args", *ros_args]) as rclpy:
+        log(f"building {count(steps, 'map step')} for each of {count(len(robots), 'robot')}")
+        plans = [(r, growth_steps(r, steps)) for r in robots]
         from nav_msgs.msg import OccupancyGrid as GridMsg
 
         from ._convert import fill_msg
@@ -119,8 +119,8 @@ def play(run_dir, *, duration: float, steps: int, topic: str = "map", hold: floa
         try:
             pubs = [node.create_publisher(GridMsg, f"/{r.name}/{topic.strip('/')}", latched_qos())
                     for r, _ in plans]
-            log(f"playing {len(plans)} robots ({', '.join(r.name for r, _ in plans)}) from "
-                f"{run_dir}: {steps} steps over {duration:g} s")
+            log(f"playing {count(len(plans), 'robot')} ({', '.join(r.name for r, _ in plans)}) from "
+                f"{run_dir}: {count(steps, 'step')} over {duration:g} s")
             t0 = time.monotonic()
             for i in range(steps):
                 wait = t0 + (duration * i / max(1, steps - 1)) - time.monotonic()
