@@ -240,7 +240,7 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root):
         # kept: back to the path (it closed the export, and the keys typed next ran commands)
         assert isinstance(app.screen, ExportScreen)
         assert app.screen.query_one(Input).value == str(out)
-        assert "Those files are kept" in str(app.screen.query_one("#export-note").render())
+        assert "Those files are kept" in str(app.screen.query_one("#export-until-edit").render())
         await pilot.press("escape")
         await pilot.pause()
         assert not isinstance(app.screen, ExportScreen) and out.stat().st_mtime_ns == stamp
@@ -275,7 +275,19 @@ async def test_select_run_inspect_export_and_the_export_loads_back(in_root):
         # a failed export opens the dialog again with the path, so the next keys edit it
         assert isinstance(app.screen, ExportScreen)
         assert app.screen.query_one(Input).value == "run/robot_1.yaml"
-        assert "Export failed" in str(app.screen.query_one("#export-note").render())
+        assert "Export failed" in str(app.screen.query_one("#export-until-edit").render())
+        # said of that path: another typed, it goes (it stayed beside the new path's own line)
+        app.screen.query_one(Input).value = "exported/other.yaml"
+        await pilot.pause()
+        assert not app.screen.query("#export-until-edit")
+        # a folder named like a map is refused in the dialog, not after "will be replaced?"
+        (in_root / "exported" / "dir.yaml").mkdir()
+        app.screen.query_one(Input).value = "exported/dir.yaml"
+        await pilot.press("enter")
+        await pilot.pause()
+        assert isinstance(app.screen, ExportScreen)
+        assert "is an existing folder" in str(app.screen.query_one("#export-error").render())
+        (in_root / "exported" / "dir.yaml").rmdir()
         await pilot.press("escape")
         await pilot.pause()
         assert not isinstance(app.screen, ExportScreen)

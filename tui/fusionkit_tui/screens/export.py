@@ -12,6 +12,7 @@ from textual.containers import Horizontal, Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Button, Input, Static
 
+from fusionkit._atomic import check_writable
 from fusionkit.errors import InputError
 
 from ..runner import export_paths
@@ -24,8 +25,9 @@ class ExportScreen(ModalScreen[str | None]):
 
     ``guard`` (:func:`..runner.output_guard`) holds the files the export must not replace
     (the input maps, images and scans, the ground truth of their run): a path that would is
-    refused in the dialog, as is a directory that does not exist. ``groups`` is the number of
-    group maps the result has, written beside the map.
+    refused in the dialog, as is a directory that does not exist or a target that is a folder.
+    ``groups`` is the number of group maps the result has, written beside the map. ``note``
+    stays; ``until_edit`` (why the path given was not written) goes once the path is changed.
     """
 
     DEFAULT_CSS = """
@@ -53,6 +55,11 @@ class ExportScreen(ModalScreen[str | None]):
         height: auto;
         margin-top: 1;
     }
+    ExportScreen #export-until-edit {
+        color: $text-error;
+        height: auto;
+        margin-top: 1;
+    }
     ExportScreen #export-error {
         color: $text-error;
         height: auto;
@@ -68,17 +75,21 @@ class ExportScreen(ModalScreen[str | None]):
 
     BINDINGS = [Binding("escape", "cancel", "Cancel")]
 
-    def __init__(self, default: str, guard=None, note: str = "", groups: int = 0) -> None:
+    def __init__(self, default: str, guard=None, note: str = "", groups: int = 0,
+                 until_edit: str = "") -> None:
         super().__init__()
         self._default = default
         self._guard = guard
         self._note = note
         self._groups = groups
+        self._until_edit = until_edit
 
     def compose(self) -> ComposeResult:
         with Vertical():
             yield Static("Export the merged map (ROS map_server YAML + PGM) and the merge report",
                          id="export-title")
+            if self._until_edit:
+                yield Static(self._until_edit, id="export-until-edit")
             if self._note:
                 yield Static(self._note, id="export-note")
             yield Input(self._default, id="export-path", placeholder="path/to/merged.yaml")
@@ -116,6 +127,7 @@ class ExportScreen(ModalScreen[str | None]):
             error.update(f"the directory {where} is not writable; choose another")
             return False
         try:
+            check_writable(p.all)   # a target that is a folder: refused here, not after "overwrite?"
             if self._guard is not None:
                 self._guard.check(p.all)
         except InputError as exc:
@@ -126,6 +138,9 @@ class ExportScreen(ModalScreen[str | None]):
 
     @on(Input.Changed)
     def _on_changed(self, event: Input.Changed) -> None:
+        if self._until_edit and event.value != self._default:
+            self._until_edit = ""          # said of the path given, not of the one typed now
+            self.query_one("#export-until-edit", Static).remove()
         self._describe(event.value)
 
     @on(Input.Submitted)

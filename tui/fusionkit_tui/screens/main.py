@@ -426,10 +426,11 @@ class MainScreen(Screen):
                     return
                 # kept: the dialog again with the path, for another name (escape leaves), so
                 # that the keys typed next edit the path rather than run commands
-                note = " ".join(filter(None, ["Those files are kept: change the path, or escape "
-                                              "to write nothing.", self._export_note()]))
-                self.app.push_screen(ExportScreen(path, output_guard(self.inputs), note=note,
-                                                  groups=len(self.result.groups)), self._export_to)
+                self.app.push_screen(ExportScreen(path, output_guard(self.inputs), note=self._export_note(),
+                                                  groups=len(self.result.groups),
+                                                  until_edit="Those files are kept: change the path, or "
+                                                             "escape to write nothing."),
+                                     self._export_to)
 
             self.app.push_screen(ConfirmScreen(overwrite_question(existing)), answered)
         else:
@@ -444,9 +445,9 @@ class MainScreen(Screen):
             self.notify(why, title="Export failed", severity="error", timeout=10)
             # the dialog again, with the path typed, so that a key pressed next edits it rather
             # than being taken as a command of the main screen
-            self.app.push_screen(ExportScreen(path, output_guard(self.inputs),
-                                              note=f"Export failed: {why}. Change the path, or "
-                                                   f"escape.", groups=len(self.result.groups)),
+            self.app.push_screen(ExportScreen(path, output_guard(self.inputs), note=self._export_note(),
+                                              until_edit=f"Export failed: {why}. Change the path, or "
+                                                         f"escape.", groups=len(self.result.groups)),
                                  self._export_to)
             return None
         self.exported = paths
