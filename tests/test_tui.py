@@ -1059,6 +1059,39 @@ async def test_the_run_legend_shows_whole_entries_and_counts_those_left_out(widt
     assert all(len(line) <= width for line in lines)
 
 
+async def test_a_placing_methods_growing_count_of_pairs_is_followed_and_not_called_the_last():
+    """A fleet's count of pairs grows as loops are added (23, then 34): the panel said "pair 23
+    of 23; fusion after this" and kept the bar at its highest, near 90 %, for the rest."""
+    from textual.app import App
+    from textual.widgets import ProgressBar
+
+    from fusionkit_tui.messages import MergeProgress
+    from fusionkit_tui.widgets.run_panel import RunPanel
+
+    class One(App):
+        def compose(self):
+            yield RunPanel()
+
+    app = One()
+    async with app.run_test(size=(100, 30)) as pilot:
+        panel = app.query_one(RunPanel)
+        panel.begin(9, 0, method="consensus")
+        bar = app.query_one(ProgressBar)
+        panel.update_progress(MergeProgress("align", 22, 23, "robot_1 + robot_9", pair=(0, 8)))
+        await pilot.pause()
+        left = str(app.query_one("#left").render())
+        assert "pair 23 of 23 so far" in left and "fusion after this" not in left, left
+        high = bar.progress
+        panel.update_progress(MergeProgress("align", 23, 34, "robot_2 + robot_9", pair=(1, 8)))
+        await pilot.pause()
+        assert bar.progress < high          # the count grew: the bar follows it
+        assert "pair 24 of 34 so far; 10 more after this" in str(app.query_one("#left").render())
+        later = bar.progress
+        panel.update_progress(MergeProgress("align", 24, 34, "robot_3 + robot_9", pair=(2, 8)))
+        await pilot.pause()
+        assert bar.progress >= later        # and within one count it never goes back
+
+
 async def test_adding_a_folder_whose_maps_are_chosen_says_so(in_root):
     """It said 'added 0 maps from run'."""
     app = make_app(["run"])

@@ -206,11 +206,14 @@ class RunPanel(Vertical):
         if ev.stage == "done":
             return
         self.query_one("#stages", Static).update(self._stages(ev.stage, ev.step, ev.total))
-        # never backwards: a refinement swarm restarts its iterations within the same step
+        # never backwards: a refinement swarm restarts its iterations within the same step;
+        # but a placing method's count of pairs grows (a fleet's later pairs, a map left out
+        # searched again), and the bar follows the count as it is now
         bar = self.query_one(ProgressBar)
         done = 100 * overall_fraction(ev.stage, ev.step, ev.total, ev.iteration, self._iterations,
                                       self._stage_list)
-        bar.update(progress=max(done, bar.progress or 0))
+        grew = ev.stage == "align" and self._stage == "align" and ev.total > self._where[1]
+        bar.update(progress=done if grew else max(done, bar.progress or 0))
         detail = self.query_one("#detail", Static)
         left = self.query_one("#left", Static)
         if ev.stage == "align":
@@ -237,10 +240,13 @@ class RunPanel(Vertical):
                 detail.update(f"{'aligning' if self._swarm else 'placing'} "
                               f"{ev.label}")
             after = ev.total - ev.step - 1
-            what = "alignment" if self._swarm else "pair"
-            left.update(f"{what} {ev.step + 1} of {ev.total}; " +
-                        (f"{after} more after this, then fusion" if after > 0 else
-                         "fusion after this"))
+            if self._swarm:
+                left.update(f"alignment {ev.step + 1} of {ev.total}; " +
+                            (f"{after} more after this, then fusion" if after > 0 else
+                             "fusion after this"))
+            else:   # more pairs may be added: loops of a fleet, a map left out searched again
+                left.update(f"pair {ev.step + 1} of {ev.total} so far" +
+                            (f"; {after} more after this" if after > 0 else ""))
         else:
             what = {"scans": "reading scans", "unique_poses": "finding unique poses (Algorithm 1)",
                     "pairing": "comparing unique poses (eq. 2)", "fuse": "fusing the placed maps"}
