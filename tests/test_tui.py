@@ -1092,6 +1092,30 @@ async def test_a_placing_methods_growing_count_of_pairs_is_followed_and_not_call
         assert bar.progress >= later        # and within one count it never goes back
 
 
+async def test_the_fused_maps_legend_never_cuts_an_entry_in_two(in_root):
+    """At 80 columns the Result tab's legend ended a line with robot_4's colour and began the
+    next with its name."""
+    app = make_app(["run/robot_1.yaml", "run/robot_2.yaml", "run/robot_3.yaml"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        await run_merge(pilot)
+        screen = app.main
+        names = [screen.labels[p.index] for p in screen.result.placements if p.merged]
+        assert len(names) >= 2
+        for width in (12, 25, 60):
+            lines = str(screen.result_panel.legend(width)).split("\n")
+            for line in lines:
+                assert len(line) <= width, (line, width)
+                for entry in filter(None, line.split("  ")):
+                    assert entry.startswith("█ ") and entry[2:] in names, (entry, lines)
+            assert sum(len(list(filter(None, line.split("  ")))) for line in lines) == len(names)
+        # on the tab: packed to the legend's own width
+        await pilot.press("4")
+        await pilot.pause()
+        legend = screen.result_panel.query_one("#legend")
+        assert str(legend.render()) == str(screen.result_panel.legend(legend.size.width))
+
+
 async def test_adding_a_folder_whose_maps_are_chosen_says_so(in_root):
     """It said 'added 0 maps from run'."""
     app = make_app(["run"])

@@ -175,16 +175,37 @@ class ResultPanel(Vertical):
         return Text("█ wall  ░ free  (blank) unknown" if getattr(self.app, "no_color", False)
                     else "white wall, blue free, black unknown")
 
-    def legend(self) -> Text:
-        """The fused map's legend: each merged map's colour, or the states."""
+    def legend(self, width: int | None = None) -> Text:
+        """The fused map's legend: each merged map's colour, or the states. With ``width``, in
+        lines of at most that many columns, an entry never cut in two (a colour ended one line
+        and its name began the next)."""
         if self._result is None or not self._by_robot or getattr(self.app, "no_color", False):
             return self.plain_legend()
         legend = Text()
+        used = 0
         for p in self._result.placements:
-            if p.merged:
-                legend.append("█ ", style=robot_colour(p.index))
-                legend.append(f"{self._names[p.index]}  ")
+            if not p.merged:
+                continue
+            name = self._names[p.index]
+            size = 2 + len(name)
+            if used and width and used + 2 + size > width:
+                legend.append("\n")
+                used = 0
+            elif used:
+                legend.append("  ")
+                used += 2
+            legend.append("█ ", style=robot_colour(p.index))
+            legend.append(name)
+            used += size
         return legend
+
+    def on_resize(self) -> None:
+        if self._result is not None:
+            self._show_legend()
+
+    def _show_legend(self) -> None:
+        shown = self.query_one("#legend", Static)
+        shown.update(self.legend(shown.size.width or self.size.width or None))
 
     def title(self) -> str:
         """The fused map's heading."""
@@ -219,7 +240,7 @@ class ResultPanel(Vertical):
         r = self._result
         preview = self.query_one("#fused-map", MapPreview)
         preview.show(r.grid, self.owner())
-        self.query_one("#legend", Static).update(self.legend())
+        self._show_legend()
         self.query_one("#fused-heading", Label).update(self.title())
 
     def _explain(self, row: int) -> None:
