@@ -216,6 +216,7 @@ class DaskExecutor(Executor):
     def map(self, fn, tasks, *, shared=None, progress=None):
         from distributed import as_completed
         from distributed.client import FutureCancelledError
+        from distributed.comm import CommClosedError
         tasks = list(tasks)
         total = len(tasks)
         if progress is not None:
@@ -223,31 +224,35 @@ class DaskExecutor(Executor):
         if not total:
             return []
         client = self._client
-        # the shared data goes to every worker once (and stays there for the next map with the
-        # same object); tasks refer to it
-        if shared is not self._shared_of:
-            self._drop_shared()
-            self._shared = client.scatter(shared, broadcast=True, hash=False) \
-                if shared is not None else None
-            self._shared_of = shared
-        handle = self._shared
-        futures = client.map(_dask_call, [fn] * total, [handle] * total, tasks, pure=False)
-        index = {f.key: n for n, f in enumerate(futures)}
         out: list = [None] * total
         done = 0
+        futures: list = []
         try:
+            # the shared data goes to every worker once (and stays there for the next map with
+            # the same object); tasks refer to it
+            if shared is not self._shared_of:
+                self._drop_shared()
+                self._shared = client.scatter(shared, broadcast=True, hash=False) \
+                    if shared is not None else None
+                self._shared_of = shared
+            handle = self._shared
+            futures = client.map(_dask_call, [fn] * total, [handle] * total, tasks, pure=False)
+            index = {f.key: n for n, f in enumerate(futures)}
             for f in as_completed(futures, loop=client.loop):
                 out[index[f.key]] = f.result()
                 done += 1
                 if progress is not None:
                     progress(done, total)
-        except FutureCancelledError as exc:
-            if "connection" not in str(exc.reason):
+        except (FutureCancelledError, CommClosedError) as exc:
+            # the scheduler gone: the futures cancelled, or a transfer cut (a task's own error
+            # is neither, and goes on as it is)
+            why = getattr(exc, "reason", None) or type(exc).__name__
+            if isinstance(exc, FutureCancelledError) and "connection" not in str(why):
                 raise
             _quiet_dask()   # the client's reconnection, cut short by the close, is not said
             raise InputError(f"the Dask scheduler at {client.scheduler.address} was lost after "
-                             f"{done} of {total} tasks ({exc.reason}); nothing was written: check "
-                             f"the scheduler and run again") from None
+                             f"{done} of {total} tasks ({why}); nothing was written: check the "
+                             f"scheduler and run again") from None
         finally:
             with contextlib.suppress(Exception):   # nothing to cancel on a scheduler gone
                 client.cancel(futures)
@@ -305,44 +310,60 @@ class DaskExecutor(Executor):
             log.setLevel(level)
 
 
-#: The schemes of the schedulers fusionkit connects to (a tls:// or wss:// one needs
-#: certificates, which it does not take; ucx:// needs UCX)
-_SCHEMES = ("tcp", "ws")
+#: The schemes a Dask scheduler listens on (tls:// and wss:// with the certificates of Dask's
+#: configuration, ``distributed.comm.tls``; ucx:// with UCX installed)
+_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
 
 
 def _probe(address: str, timeout: float) -> None:
     """Ask the scheduler at ``address`` who it is, all within ``timeout`` seconds: a port that
     takes the connection and never answers (the dashboard's, given as tcp://) held Dask's
-    client for good. Run in a thread of its own, so that a caller's running event loop (a
-    notebook's) is not in the way."""
-    from concurrent.futures import ThreadPoolExecutor
+    client for good. Asked from a daemon thread of its own, so that a caller's running event
+    loop (a notebook's) is not in the way, and neither a Ctrl-C nor the process's exit waits
+    for it (a name lookup cannot be cut short)."""
+    import queue
 
     from distributed.comm import connect
+    from distributed.security import Security
 
     async def ask():
-        comm = await connect(address, timeout=timeout)
+        # tls:// and wss:// take their certificates from Dask's configuration, as Client does
+        comm = await connect(address, timeout=timeout, **Security().get_connection_args("client"))
         try:
-            await comm.write({"op": "identity", "reply": True})
+            await comm.write({"op": "identity", "n_workers": 0, "reply": True})
             return await comm.read()
         finally:
             comm.abort()
 
-    def run():
-        return asyncio.run(asyncio.wait_for(ask(), timeout))
+    answers: queue.Queue = queue.Queue()
 
-    with ThreadPoolExecutor(1) as pool:
+    def run():
         try:
-            answer = pool.submit(run).result()
-        except (TimeoutError, asyncio.TimeoutError):
-            raise InputError(f"the Dask scheduler at {address} did not answer within {timeout:g} s; "
-                             f"check the address (the scheduler's port, 8786 by default, not the "
-                             f"dashboard's) and that the scheduler is running") from None
-        except Exception as exc:   # refused, reset, closed: Dask's comm errors are OSErrors or not
-            raise InputError(f"no Dask scheduler answered at {address} ({type(exc).__name__}); check "
-                             f"the address and that the scheduler is running") from None
-    if not isinstance(answer, dict) or answer.get("type") != "Scheduler":
+            answers.put((True, asyncio.run(asyncio.wait_for(ask(), timeout))))
+        except BaseException as exc:   # noqa: BLE001 - handed to the caller
+            answers.put((False, exc))
+
+    threading.Thread(target=run, name="fusionkit-dask-probe", daemon=True).start()
+    late = (f"the Dask scheduler at {address} did not answer within {timeout:g} s; check the "
+            f"address (the scheduler's port, 8786 by default, not the dashboard's), that the "
+            f"scheduler is running, and for a busy one a longer --scheduler-timeout")
+    try:
+        ok, answer = answers.get(timeout=timeout + 1.0)
+    except queue.Empty:
+        raise InputError(late) from None
+    if not ok:
+        if isinstance(answer, (TimeoutError, asyncio.TimeoutError)):
+            raise InputError(late)
+        if isinstance(answer, TypeError) and address.startswith(("tls", "wss")):
+            raise InputError(f"{address}: a TLS scheduler needs the client's certificates in Dask's "
+                             f"configuration (distributed.comm.tls.ca-file, .client.cert, "
+                             f".client.key)")
+        # refused, reset, closed, UCX missing: Dask's comm errors are OSErrors or not
+        raise InputError(f"no Dask scheduler answered at {address} ({type(answer).__name__}); check "
+                         f"the address and that the scheduler is running")
+    if not isinstance(answer, dict) or "n_workers" not in answer:
         raise InputError(f"{address} answers, but not as a Dask scheduler; give the scheduler's "
-                         f"address (tcp://HOST:8786 by default)")
+                         f"address (tcp://HOST:8786 by default), not a worker's")
 
 
 def _check_address(address) -> None:
@@ -360,10 +381,7 @@ def _check_address(address) -> None:
         raise InputError(f"{fix} (the port is a number from 1 to 65535)") from None
     if parts.scheme not in _SCHEMES:
         hint = " (http is the dashboard's; the scheduler's own port is 8786 by default)" \
-            if parts.scheme in ("http", "https") else \
-            f" ({parts.scheme}:// is not supported: a tls:// or wss:// scheduler needs certificates " \
-            f"fusionkit does not take, ucx:// needs UCX; start the scheduler with tcp://)" \
-            if parts.scheme in ("tls", "wss", "ucx") else ""
+            if parts.scheme in ("http", "https") else ""
         raise InputError(f"{fix}{hint}")
     if not parts.hostname or port == 0 or parts.path not in ("", "/"):
         raise InputError(fix)

@@ -157,7 +157,7 @@ def _image_header(path: Path) -> tuple[_ImageHeader, int]:
         kind = {b"P1": "PBM", b"P4": "PBM", b"P3": "PPM", b"P6": "PPM", b"P7": "PAM"}[head[:2]]
     elif not head:
         raise MapFormatError(f"{path}: the map image is empty; re-export it as PGM or PNG")
-    elif re.match(rb"\s*(#[^\n]*\n\s*)*[A-Za-z_]+\s*:", head) and b"image" in head and b"resolution" in head:
+    elif re.search(rb"(^|[{,\s])image\s*:", head) and re.search(rb"(^|[{,\s])resolution\s*:", head):
         raise MapFormatError(f"{path}: a map YAML, not an image; the 'image' key must name the map's "
                              f"PGM or PNG file")
     else:

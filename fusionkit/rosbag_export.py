@@ -263,10 +263,11 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
     check_writable([out])
     robots = _run_robots(run_dir)
     n_max = max(log.n_scans for _, log, _ in robots)
-    last = (int(round(start_s * 1e9)) + int(round((n_max - 1) * 1e9 / rate))) / 1e9
-    if last >= 2**31:   # a stamp's seconds are a 32-bit integer in ROS 1 and ROS 2 messages
-        raise InputError(f"the last of {n_max} scans would be stamped {last:.6g} s, past 2^31 s, the "
-                         f"latest time a ROS message holds; give a higher rate or an earlier start")
+    last = int(round(start_s * 1e9)) + int(round((n_max - 1) * (1e9 / rate)))   # as _write_bag
+    if last // 10**9 >= 2**31:   # a stamp's seconds are a 32-bit integer in ROS 1 and ROS 2
+        raise InputError(f"the last of {n_max} scans would be stamped {last / 1e9:.3f} s, past 2^31 s "
+                         f"(2147483648), the latest time a ROS message holds; give a higher rate or "
+                         f"an earlier start")
 
     _sweep_dead_exports(parent, out.name)
     try:

@@ -484,6 +484,10 @@ def _bad_cases():
         ("image is another map's yaml",
          lambda d: (write_map(d, "other", GOOD), write_map(d, "m", GOOD, image="other.yaml"))[1],
          "other.yaml", "a map YAML, not an image"),
+        ("image is a map yaml in flow style after ---",
+         lambda d: ((d / "other.yaml").write_text("---\n{image: m.pgm, resolution: 0.05}\n"),
+                    write_map(d, "m", GOOD, image="other.yaml"))[1],
+         "other.yaml", "a map YAML, not an image"),
     ]
 
 

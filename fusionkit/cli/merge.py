@@ -191,11 +191,9 @@ TRUTH_FILE = "a file of the ground truth of the inputs' run,"
 def run_truth(inputs) -> list[Path]:
     """The ground truth of each run an input map stands in (a ``truth.json`` beside it): that
     file, the world map it names and the run's robot maps, with their images. A merge written
-    over one of them would spoil the run's evaluation (``fusionkit evaluate``), over a robot's
-    scan log the next merge of that robot."""
+    over one of them would spoil the run's evaluation (``fusionkit evaluate``)."""
     from ..errors import FusionkitError
     from ..mapio import _protected
-    from ..scanlog import scans_path_for
     from .evaluate import _map_of, read_truth
 
     out: list[Path] = []
@@ -208,8 +206,7 @@ def run_truth(inputs) -> list[Path]:
             t = read_truth(truth)
         except (FusionkitError, OSError):
             continue  # not a run's truth after all: only the file itself is kept
-        robots = [_map_of(t, name) for name in t.robots]
-        out += _protected([t.world, *robots]) + [scans_path_for(m) for m in robots]
+        out += _protected([t.world, *(_map_of(t, name) for name in t.robots)])
     return out
 
 

@@ -96,7 +96,7 @@ class MergeNode:
         except Exception:  # noqa: BLE001 - absent or broken tf2: the topics say it all
             self.tf = None
         mode = ("known initial poses" if settings.known_init_poses else
-                f"method {settings.method}, estimation every {1 / settings.estimation_rate:.3g} s")
+                f"method {settings.method}, estimation every {f'{1 / settings.estimation_rate:.3f}'.rstrip('0').rstrip('.')} s")
         self.log.info(f"map merging started: robots' '{settings.robot_map_topic}' topics into "
                       f"{self.merged_topic} (frame {settings.world_frame}), {mode}")
         for robot, what in sorted(settings.partial_init_poses.items()):   # said once, here
