@@ -111,3 +111,9 @@ def canvas_for(grids, transforms, resolution: float, margin_cells: int = 2) -> O
     cols = int(math.ceil((xmax + m - x0) / resolution))
     rows = int(math.ceil((ymax + m - y0) / resolution))
     return OccupancyGrid(np.full((rows, cols), UNKNOWN, np.int8), resolution, (x0, y0, 0.0))
+
+
+from ._callable_module import callable_as  # noqa: E402
+
+# ``fusionkit.resample`` is this module once it is imported: callable as resample() all the same
+callable_as(__name__, "resample")

@@ -297,19 +297,7 @@ def simulate(world: OccupancyGrid, config: SimulationConfig = SimulationConfig()
 from .sim_output import write_run  # noqa: E402  (re-exported: it needs Simulation defined)
 
 
-class _CallableModule(type(math)):
-    """This module, callable as :func:`simulate`.
+from ._callable_module import callable_as  # noqa: E402
 
-    ``fusionkit.simulate`` names both this module and its :func:`simulate` function (the
-    package exports the function lazily). Once any code has imported the module, Python's import
-    system binds the package attribute to the module; calling the module calls the function, so
-    ``fusionkit.simulate(world, config)`` works whichever of the two the name holds.
-    """
-
-    def __call__(self, *args, **kwargs):
-        return simulate(*args, **kwargs)
-
-
-import sys as _sys  # noqa: E402
-
-_sys.modules[__name__].__class__ = _CallableModule
+# ``fusionkit.simulate`` is this module once it is imported: callable as simulate() all the same
+callable_as(__name__, "simulate")

@@ -338,3 +338,18 @@ def test_fk_simulate_is_callable_even_after_the_module_was_imported():
     a, b = fk.simulate(world, cfg), module.simulate(world, cfg)
     assert len(a.robots) == 2
     assert all(np.array_equal(x.grid.data, y.grid.data) for x, y in zip(a.robots, b.robots))
+
+
+def test_fk_resample_is_callable_even_after_the_module_was_imported():
+    """fk.resample, exported as a function, was the module (not callable) once anything had
+    imported fusionkit.resample: fk.fuse_maps, fk.merge and fk.simulate all do."""
+    import importlib
+
+    import fusionkit as fk
+
+    module = importlib.import_module("fusionkit.resample")   # binds fk.resample to the module
+    g = fk.default_world()
+    canvas = fk.canvas_for([g], [fk.Transform2D()], g.resolution)
+    t = fk.Transform2D(0.5, 0.0, 0.1)
+    assert np.array_equal(fk.resample(g, t, canvas).data, module.resample(g, t, canvas).data)
+
