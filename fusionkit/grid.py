@@ -22,6 +22,26 @@ FREE = 0
 OCCUPIED = 100
 
 
+def _check_cells(raw: np.ndarray) -> None:
+    """Refuse cell values an int8 grid cannot take as they are (an image's 0-255, probabilities
+    in 0..1, NaN), with what to do instead."""
+    from .errors import InputError
+
+    if raw.dtype.kind not in "iubf":
+        raise InputError(f"grid data must be numbers (-1 unknown, 0 free, 100 occupied), got {raw.dtype}")
+    if raw.dtype.kind == "f":
+        if not np.isfinite(raw).all():
+            raise InputError("grid data holds NaN or infinite values; give -1 for unknown cells")
+        if (raw != np.round(raw)).any():
+            raise InputError(f"grid data holds fractions (from {raw.min():g} to {raw.max():g}): give "
+                             f"occupancy in percent, -1 unknown, 0 free to 100 occupied (probabilities "
+                             f"in 0..1 times 100, rounded)")
+    lo, hi = raw.min(), raw.max()
+    if lo < -1 or hi > 100:
+        raise InputError(f"grid data holds values from {lo:g} to {hi:g}: give -1 unknown, 0 free to 100 "
+                         f"occupied (an image's pixels are read as a map by load_map)")
+
+
 @dataclass(frozen=True, eq=False)
 class OccupancyGrid:
     """A 2-D occupancy grid in the ``nav_msgs/OccupancyGrid`` convention.
@@ -42,7 +62,10 @@ class OccupancyGrid:
     name: str = field(default="", compare=False)
 
     def __post_init__(self):
-        data = np.ascontiguousarray(self.data, dtype=np.int8)
+        raw = np.asarray(self.data)
+        if raw.dtype != np.int8 and raw.size:
+            _check_cells(raw)   # cast as they are, 200 wrapped to -56 and 0.9 fell to 0 (free)
+        data = np.ascontiguousarray(raw, dtype=np.int8)
         if data.ndim != 2:
             raise ValueError(f"grid data must be 2-D (rows, cols), got shape {data.shape}")
         res = float(self.resolution)

@@ -330,6 +330,11 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
     res = grids[ref].resolution
     out = []
     for g in grids:
+        if not g.data.size:
+            # no cell at all: as a map with no known cell, which every method refuses with its
+            # reason (an empty image crashed OpenCV's morphology in the consensus method)
+            out.append(OccupancyGrid(np.full((1, 1), UNKNOWN, np.int8), res, g.origin, g.name))
+            continue
         if abs(g.resolution - res) <= 1e-9 * res:
             out.append(g)
             continue

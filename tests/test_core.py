@@ -98,6 +98,20 @@ def test_grid_refuses_bad_geometry():
         g.data[0, 0] = 5          # grids are values: their cells cannot be changed in place
 
 
+@pytest.mark.parametrize("cells, said", [
+    (np.array([[0, 100, 200, 255]]), "from 0 to 255"),          # an image's pixels: 200 became -56
+    (np.array([[0.0, 0.3, 0.9]]), "fractions"),                  # probabilities: all became free
+    (np.array([[0.0, np.nan]]), "NaN"),
+    (np.array([[-5, 0]]), "from -5 to 0"),
+])
+def test_grid_refuses_cells_it_would_change_in_the_cast(cells, said):
+    with pytest.raises(InputError, match=said):
+        OccupancyGrid(cells, 0.1)
+    # whole numbers in range are taken whatever their type
+    assert OccupancyGrid(np.array([[-1.0, 0.0, 100.0]]), 0.1).data.tolist() == [[-1, 0, 100]]
+    assert OccupancyGrid(np.array([[0, 55, 100]], np.uint8), 0.1).data.tolist() == [[0, 55, 100]]
+
+
 # -- resample ---------------------------------------------------------------------------------
 def _naive_resample(src: OccupancyGrid, t: Transform2D, target: OccupancyGrid) -> np.ndarray:
     out = np.full(target.shape, -1, np.int8)

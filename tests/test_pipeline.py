@@ -78,6 +78,16 @@ def test_callback_sees_each_pso_iteration_and_can_cancel(sim):
     assert seen[-1].pso.iteration == 3
 
 
+@pytest.mark.parametrize("method", ["consensus", "spectral-pso", "map-merge"])
+def test_a_grid_with_no_cell_is_refused_with_its_reason_by_every_method(method):
+    """The default method crashed in OpenCV (an empty image) on a 0 x 3 grid."""
+    from fusionkit.grid import OccupancyGrid
+    empty = OccupancyGrid(np.zeros((0, 3), np.int8), 0.1, name="empty")
+    result = merge([default_world(), empty], config=MergeConfig(method=method))
+    p = result.placements[1]
+    assert not p.merged and p.transform is None and "no known cell" in p.reason, p
+
+
 def test_maps_of_different_worlds_are_not_merged():
     a = simulate(make_world("office", seed=1), SimulationConfig(robots=1, poses=800, seed=1)).robots[0]
     b = simulate(make_world("cave", seed=2), SimulationConfig(robots=1, poses=800, seed=2)).robots[0]
