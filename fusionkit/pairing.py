@@ -115,6 +115,11 @@ def fusion_order(counts: np.ndarray, *, reference: int | None = None) -> FusionP
     n = counts.shape[0]
     if counts.shape != (n, n):
         raise InputError(f"agreement counts must be square, got {counts.shape}")
+    if reference is not None and (isinstance(reference, bool) or not isinstance(reference, (int, np.integer))
+                                  or not 0 <= reference < n):
+        # -1 was taken as the last map, which then joined as a new one
+        raise InputError(f"reference must be the index of one of the {n} maps (0 to {n - 1}), "
+                         f"got {reference!r}")
     c = counts.copy()
     np.fill_diagonal(c, 0)
     if n < 2 or c.max() <= 0:

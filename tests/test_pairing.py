@@ -45,3 +45,12 @@ def test_maps_that_agree_with_nobody_are_reported_not_forced():
     plan = fusion_order(c)
     assert plan.unplaced == (2,)
     assert fusion_order(np.zeros((3, 3), int)).steps == ()
+
+
+@pytest.mark.parametrize("reference", [3, -1, 1.0, True])
+def test_fusion_order_refuses_a_reference_that_is_not_a_maps_index(reference):
+    """3 raised a bare IndexError; -1 was taken as the last map, which then joined as a new one."""
+    c = np.array([[0, 5, 1], [5, 0, 7], [1, 7, 0]])
+    with pytest.raises(InputError, match="index of one of the 3 maps"):
+        fusion_order(c, reference=reference)
+    assert fusion_order(c, reference=2).steps[0][0] == 2
