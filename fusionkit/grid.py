@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .errors import InputError
 from .transform import Transform2D
 
 __all__ = ["OccupancyGrid", "UNKNOWN", "FREE", "OCCUPIED"]
@@ -25,8 +26,6 @@ OCCUPIED = 100
 def _check_cells(raw: np.ndarray) -> None:
     """Refuse cell values an int8 grid cannot take as they are (an image's 0-255, probabilities
     in 0..1, NaN), with what to do instead."""
-    from .errors import InputError
-
     if raw.dtype.kind not in "iubf":
         raise InputError(f"grid data must be numbers (-1 unknown, 0 free, 100 occupied), got {raw.dtype}")
     if raw.dtype.kind == "f":
@@ -67,15 +66,15 @@ class OccupancyGrid:
             _check_cells(raw)   # cast as they are, 200 wrapped to -56 and 0.9 fell to 0 (free)
         data = np.ascontiguousarray(raw, dtype=np.int8)
         if data.ndim != 2:
-            raise ValueError(f"grid data must be 2-D (rows, cols), got shape {data.shape}")
+            raise InputError(f"grid data must be 2-D (rows, cols), got shape {data.shape}")
         res = float(self.resolution)
         if not (res > 0 and math.isfinite(res)):
-            raise ValueError(f"grid resolution must be a positive number of metres, got {self.resolution}")
+            raise InputError(f"grid resolution must be a positive number of metres, got {self.resolution}")
         origin = tuple(float(v) for v in self.origin)
         if len(origin) == 2:
             origin = (*origin, 0.0)
         if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
-            raise ValueError(f"grid origin must be finite (x, y, yaw), got {self.origin}")
+            raise InputError(f"grid origin must be finite (x, y, yaw), got {self.origin}")
         data.setflags(write=False)
         object.__setattr__(self, "data", data)
         object.__setattr__(self, "resolution", res)

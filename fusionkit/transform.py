@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .errors import InputError
+
 __all__ = ["Transform2D", "wrap_angle"]
 
 
@@ -44,7 +46,7 @@ class Transform2D:
         x, y, theta = float(self.x), float(self.y), float(self.theta)
         for name, v in (("x", x), ("y", y), ("theta", theta)):
             if not math.isfinite(v):
-                raise ValueError(f"transform {name} must be finite, got {v}")
+                raise InputError(f"transform {name} must be finite, got {v}")
         object.__setattr__(self, "x", x)
         object.__setattr__(self, "y", y)
         object.__setattr__(self, "theta", wrap_angle(theta))
@@ -59,7 +61,7 @@ class Transform2D:
         """From a 3x3 homogeneous (or 2x3) matrix; the rotation part is orthonormalised."""
         m = np.asarray(m, dtype=float)
         if m.shape not in ((3, 3), (2, 3)):
-            raise ValueError(f"expected a 3x3 or 2x3 matrix, got shape {m.shape}")
+            raise InputError(f"expected a 3x3 or 2x3 matrix, got shape {m.shape}")
         return cls(m[0, 2], m[1, 2], math.atan2(m[1, 0] - m[0, 1], m[0, 0] + m[1, 1]))
 
     @classmethod
@@ -68,7 +70,7 @@ class Transform2D:
         try:
             return cls(float(d["x"]), float(d["y"]), float(d["theta"]))
         except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"a transform needs numeric keys x, y, theta; got {d!r}") from exc
+            raise InputError(f"a transform needs numeric keys x, y, theta; got {d!r}") from exc
 
     @classmethod
     def from_paper(cls, dx: float, dy: float, dphi: float) -> "Transform2D":

@@ -217,3 +217,15 @@ def test_outputs_may_not_be_inputs(tmp_path):
     (tmp_path / "a.yaml").write_text("x")
     with pytest.raises(InputError, match="overwrite the input"):
         check_not_input([tmp_path / "sub" / ".." / "a.yaml"], [tmp_path / "a.yaml"])
+
+
+def test_a_bad_grid_or_transform_is_a_fusionkit_error():
+    """They raised a plain ValueError: ``except fk.FusionkitError`` let a bad resolution, origin
+    or NaN transform through."""
+    from fusionkit.errors import FusionkitError
+    with pytest.raises(FusionkitError, match="resolution"):
+        OccupancyGrid(np.zeros((2, 2)), -1.0)
+    with pytest.raises(FusionkitError, match="origin"):
+        OccupancyGrid(np.zeros((2, 2)), 0.1, (0.0, math.nan, 0.0))
+    with pytest.raises(FusionkitError, match="finite"):
+        Transform2D(math.nan, 0.0, 0.0)
