@@ -117,6 +117,13 @@ class MergeConfig:
             raise InputError(f"max_false_merge is a risk in (0, 1) (e.g. 0.01), got {v!r}")
         if self.method not in METHODS:
             raise InputError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
+        for name in ("theta", "accept"):      # "0.9" raised a TypeError deep in the comparison
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise InputError(f"{name} must be a number, got {v!r}")
+        for name in ("sub_sec", "unique_count", "min_overlap_cells", "virtual_poses", "reference"):
+            if not _is_int(getattr(self, name)):  # 1.5 was taken
+                raise InputError(f"{name} must be a whole number, got {getattr(self, name)!r}")
         if not -1.0 <= self.theta <= 1.0:
             raise InputError(f"theta is a Pearson correlation threshold in [-1, 1], got {self.theta}")
         if not (_is_int(self.seed) and 0 <= self.seed < 2**63):

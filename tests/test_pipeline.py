@@ -78,6 +78,17 @@ def test_callback_sees_each_pso_iteration_and_can_cancel(sim):
     assert seen[-1].pso.iteration == 3
 
 
+@pytest.mark.parametrize("settings, said", [
+    ({"theta": "0.9"}, "theta must be a number"),          # a TypeError deep in a comparison
+    ({"accept": float("nan")}, "accept must be a number"),
+    ({"unique_count": 1.5}, "unique_count must be a whole number"),   # taken as it was
+    ({"reference": True}, "reference must be a whole number"),
+])
+def test_merge_settings_of_the_wrong_kind_are_refused_in_one_line(settings, said):
+    with pytest.raises(InputError, match=said):
+        MergeConfig(**settings)
+
+
 @pytest.mark.parametrize("method", ["consensus", "spectral-pso", "map-merge"])
 def test_a_grid_with_no_cell_is_refused_with_its_reason_by_every_method(method):
     """The default method crashed in OpenCV (an empty image) on a 0 x 3 grid."""
