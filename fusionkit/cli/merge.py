@@ -62,10 +62,6 @@ def run(args) -> int:
         raise InputError("--report is empty: give the report's path, or leave --report out for "
                          f"{out.stem}.report.json beside the map")
     report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
-    if report_path.suffix.lower() in (".yaml", ".yml", ".pgm", ".png", ".npz"):
-        # a map's or a scan log's name: most likely a slip, and the file it names would be lost
-        raise InputError(f"--report {show(str(report_path), 200)}: the report is JSON; give it a name "
-                         f"ending in .json (e.g. {out.stem}.report.json)")
     image_path = out.with_suffix(".pgm")
     if len(args.maps) < 2:
         raise InputError("give at least two maps to merge")
@@ -74,6 +70,10 @@ def run(args) -> int:
     check_distinct([("-o", out), ("the output's image", image_path), ("--report", report_path)])
     guard = OutputGuard.of(inputs)
     guard.check([out, image_path, report_path])
+    if report_path.suffix.lower() in (".yaml", ".yml", ".pgm", ".png", ".npz"):
+        # a map's or a scan log's name: most likely a slip, and the file it names would be lost
+        raise InputError(f"--report {show(str(report_path), 200)}: the report is JSON; give it a name "
+                         f"ending in .json (e.g. {out.stem}.report.json)")
     reference = 0
     if args.reference is not None:
         # the same file however it is written (./B.yaml for B.yaml, an absolute path)
