@@ -8,6 +8,8 @@ files written (each robot's files as one set, a split as one set with ``truth.js
 
 from __future__ import annotations
 
+from numbers import Integral
+
 import json
 import math
 import re
@@ -282,8 +284,8 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
     InputError
         Unreadable or empty log, bad option values, or outputs that already exist.
     """
-    if split is not None and split < 1:
-        raise InputError(f"--split must be >= 1 sessions, got {split}")
+    if split is not None and (isinstance(split, bool) or not isinstance(split, Integral) or split < 1):
+        raise InputError(f"--split must be a whole number >= 1 of sessions, got {split!r}")
     if not 0.0 <= overlap <= 0.9:
         raise InputError(f"overlap must be between 0 and 0.9, got {overlap}")
     if split is not None and split > 1 and name is not None:

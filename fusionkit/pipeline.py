@@ -252,6 +252,8 @@ class MergeResult:
         fused maps are listed under ``group_outputs`` (paths from :func:`group_output_paths`,
         none without ``output``)."""
         names = list(inputs) if inputs is not None else [p.name for p in self.placements]
+        if len(names) != len(self.placements):
+            raise InputError(f"give one input name per map: {len(names)} for {len(self.placements)} maps")
         maps = []
         for p in self.placements:
             entry = {"input": names[p.index], "merged": p.merged,

@@ -7,10 +7,12 @@ sample a fused map onto the ground-truth grid for the metrics (CONTRACTS section
 from __future__ import annotations
 
 import math
+from numbers import Real
 
 import numpy as np
 
 from ._jit import pjit, prange
+from .errors import InputError
 from .grid import UNKNOWN, OccupancyGrid
 from .transform import Transform2D
 
@@ -97,10 +99,12 @@ def transformed_bounds(grid: OccupancyGrid, transform: Transform2D, known_only: 
 def canvas_for(grids, transforms, resolution: float, margin_cells: int = 2) -> OccupancyGrid:
     """An all-unknown, axis-aligned grid at ``resolution`` covering every grid's known cells
     after its transform, plus a margin; the canvas frame is the transforms' target frame."""
+    if isinstance(resolution, bool) or not isinstance(resolution, Real) or not 0 < resolution < math.inf:
+        raise InputError(f"the canvas resolution must be a positive number of metres, got {resolution!r}")
     boxes = [transformed_bounds(g, t) for g, t in zip(grids, transforms)]
     boxes = [b for b in boxes if b is not None]
     if not boxes:
-        raise ValueError("no known cells in any grid: nothing to place on a canvas")
+        raise InputError("no known cells in any grid: nothing to place on a canvas")
     b = np.array(boxes)
     xmin, ymin = b[:, 0].min(), b[:, 1].min()
     xmax, ymax = b[:, 2].max(), b[:, 3].max()

@@ -26,6 +26,7 @@ pair of scans, matching or not). fusionkit keeps DC out of the spectra by defaul
 from __future__ import annotations
 
 import math
+from numbers import Real
 from dataclasses import dataclass
 
 import numpy as np
@@ -158,6 +159,10 @@ def find_unique_poses(log: ScanLog, *, sub_sec: int = 5, delta: float | None = N
                          f"{2 * sub_sec + 1} poses; record more poses or lower sub_sec")
     if delta is None and (target is None or target < 1):
         raise InputError("give either delta (a threshold) or target (a number of unique poses >= 1)")
+    if delta is not None and not (isinstance(delta, Real) and not isinstance(delta, bool)
+                                  and 0.0 <= delta < math.inf):
+        # as MergeConfig: a negative threshold marked every pose unique
+        raise InputError(f"delta is a divergence threshold >= 0 (or None), got {delta!r}")
     spectra = scan_spectra(log, dc=dc)
     o_spec = spectra.mean(axis=0)                        # line 1: overall spectrum
     divergence = np.abs(spectra - o_spec).sum(axis=1)    # line 6: dif = sum |spec - o_spec|

@@ -394,3 +394,12 @@ def test_an_import_killed_mid_commit_into_a_new_folder_can_be_run_again_without_
     assert any(not f.name.startswith(".") for f in out.iterdir())   # part of it in view
     import_carmen(p, out, split=split)                               # no --force needed
     assert not [f.name for f in out.iterdir() if f.name.startswith(".")]
+
+
+@pytest.mark.parametrize("split", [2.5, "2", True])
+def test_a_split_that_is_not_a_whole_number_is_refused_in_one_line(tmp_path, split):
+    """2.5 raised a TypeError deep in the split."""
+    p = write(tmp_path, [flaser([1.0, 2.0, 3.0, 4.0], (k, 0, 0), k) for k in range(30)])
+    with pytest.raises(InputError, match="whole number >= 1 of sessions"):
+        import_carmen(p, tmp_path / "out", split=split)
+    assert not (tmp_path / "out").exists()

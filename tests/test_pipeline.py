@@ -89,6 +89,18 @@ def test_merge_settings_of_the_wrong_kind_are_refused_in_one_line(settings, said
         MergeConfig(**settings)
 
 
+def test_the_report_needs_one_input_name_per_map_and_a_canvas_a_resolution(sim):
+    """Too few names raised an IndexError; a resolution of 0 an OverflowError."""
+    from fusionkit.resample import canvas_for
+    grids = [r.grid for r in sim.robots[:2]]
+    result = merge(grids, config=MergeConfig(method="map-merge"))
+    with pytest.raises(InputError, match="one input name per map: 1 for 2 maps"):
+        result.report(["only_one.yaml"])
+    assert [m["input"] for m in result.report(["a.yaml", "b.yaml"])["maps"]] == ["a.yaml", "b.yaml"]
+    with pytest.raises(InputError, match="resolution must be a positive number"):
+        canvas_for(grids, [Transform2D(), Transform2D()], 0)
+
+
 @pytest.mark.parametrize("method", ["consensus", "spectral-pso", "map-merge"])
 def test_a_grid_with_no_cell_is_refused_with_its_reason_by_every_method(method):
     """The default method crashed in OpenCV (an empty image) on a 0 x 3 grid."""

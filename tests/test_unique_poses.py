@@ -87,3 +87,13 @@ def test_relative_heading_recovers_a_turn():
     # robot b turned by -25 beams sees a's scan shifted by +25 beams
     dth, peak = relative_heading(scan, np.roll(scan, 25), inc)
     assert math.isclose(dth, 25 * inc) and peak > 0.99
+
+
+@pytest.mark.parametrize("delta", [-1.0, math.nan, "0.1"])
+def test_a_threshold_merge_config_refuses_is_refused_here_too(delta):
+    """delta=-1 was taken and marked every pose unique (MergeConfig refused it)."""
+    rng = np.random.default_rng(0)
+    log = _log(rng.uniform(1.0, 5.0, (40, 36)))
+    with pytest.raises(InputError, match="delta is a divergence threshold"):
+        find_unique_poses(log, sub_sec=2, delta=delta)
+    assert find_unique_poses(log, sub_sec=2, delta=0.0) is not None
