@@ -339,17 +339,13 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
     res = grids[ref].resolution
     out = []
     for g in grids:
-        if not g.data.size:
-            # no cell at all: as a map with no known cell, which every method refuses with its
-            # reason (an empty image crashed OpenCV's morphology in the consensus method)
-            out.append(OccupancyGrid(np.full((1, 1), UNKNOWN, np.int8), res, g.origin, g.name))
-            continue
-        if abs(g.resolution - res) <= 1e-9 * res:
+        if abs(g.resolution - res) <= 1e-9 * res and g.data.size:
             out.append(g)
             continue
         if not g.known_mask().any():
-            # nothing to resample (and no extent worth cells): one unknown cell at the reference's
-            # cell size, which the method refuses with its reason
+            # nothing to resample (and no extent worth cells), or no cell at all (an empty image
+            # crashed OpenCV's morphology in the consensus method): one unknown cell at the
+            # reference's cell size, which the method refuses with its reason
             out.append(OccupancyGrid(np.full((1, 1), UNKNOWN, np.int8), res, g.origin, g.name))
             continue
         x0, y0, x1, y1 = transformed_bounds(g, Transform2D.identity())

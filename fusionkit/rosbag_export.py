@@ -263,7 +263,7 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
     check_writable([out])
     robots = _run_robots(run_dir)
     n_max = max(log.n_scans for _, log, _ in robots)
-    last = int(round(start_s * 1e9)) + int(round((n_max - 1) * (1e9 / rate)))   # as _write_bag
+    last = _stamp_ns(start_s, rate, n_max - 1)
     if last // 10**9 >= 2**31:   # a stamp's seconds are a 32-bit integer in ROS 1 and ROS 2
         raise InputError(f"the last of {n_max} scans would be stamped {last / 1e9:.3f} s, past 2^31 s "
                          f"(2147483648), the latest time a ROS message holds; give a higher rate or "
@@ -335,13 +335,18 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def _stamp_ns(start_s: float, rate: float, i: int) -> int:
+    """The stamp (ns) of scan ``i``: ``start_s + i / rate`` seconds."""
+    return int(round(start_s * 1e9)) + int(round(i * (1e9 / rate)))
+
+
 def _write_bag(path: Path, robots, ros1: bool, storage: str, rate: float, start_s: float,
                progress):
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin, Writer as Writer2
 
     f = _MsgFactory(ros1)
-    start = int(round(start_s * 1e9))
+    start = _stamp_ns(start_s, rate, 0)
     period = 1e9 / rate
     if ros1:
         writer = Writer1(path)
@@ -376,7 +381,7 @@ def _write_bag(path: Path, robots, ros1: bool, storage: str, rate: float, start_
                 count += 1
         n_max = max(log.n_scans for _, log, *_ in per)
         for i in range(n_max):
-            stamp = start + int(round(i * period))
+            stamp = _stamp_ns(start_s, rate, i)
             for name, log, grid, c_scan, c_odom, _ in per:
                 if i >= log.n_scans:
                     continue
