@@ -26,7 +26,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import ndimage
 
+from ._atomic import show
 from ._jit import pjit, prange
+from ._validate import number, whole
 from .errors import InputError
 from .grid import OccupancyGrid
 from .pso import PSOConfig, PSOResult, pso_minimize
@@ -69,6 +71,29 @@ def mask_points(log: ScanLog, indices) -> np.ndarray:
     if idx.size == 0:
         return np.zeros((0, 2))
     return log.endpoints(idx)
+
+
+def _points(points, name: str) -> np.ndarray:
+    """``points`` as a finite (N, 2) float array (N may be 0), or one :class:`InputError`."""
+    try:
+        pts = np.asarray(points, float)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} must be an (N, 2) array of x, y in metres, got {show(points)}") from None
+    if pts.size == 0:
+        return np.zeros((0, 2))
+    if pts.ndim != 2 or pts.shape[1] != 2:
+        raise InputError(f"{name} must be an (N, 2) array of x, y in metres, got shape {pts.shape}")
+    if not np.isfinite(pts).all():
+        raise InputError(f"{name} holds NaN or infinite coordinates: drop those points")
+    return pts
+
+
+def _cell_size(resolution) -> float:
+    """``resolution`` as a positive finite float (m per cell), or one :class:`InputError`."""
+    r = number(resolution, "resolution")
+    if r <= 0:
+        raise InputError(f"resolution must be > 0 m per cell, got {show(resolution)}")
+    return r
 
 
 def dedupe_points(points: np.ndarray, resolution: float) -> np.ndarray:
@@ -245,6 +270,8 @@ def align_points(reference: np.ndarray, moving: np.ndarray, resolution: float, *
     callback : callable(PSOState) -> bool, optional
         Called each iteration; True stops the swarm.
     """
+    resolution = _cell_size(resolution)
+    reference, moving = _points(reference, "reference"), _points(moving, "moving")
     fld = make_field(reference, resolution, sigma=config.sigma)
     mov = dedupe_points(moving, resolution)
     if len(mov) == 0:
@@ -275,6 +302,13 @@ def overlap_score(a: OccupancyGrid, b: OccupancyGrid, transform: Transform2D, *,
     the fraction within ``tolerance`` cells of an occupied cell of a. A correct placement scores
     near 1; a wrong one lands walls in a's free space and scores low.
     """
+    tolerance = whole(tolerance, "tolerance")
+    if tolerance < 0:
+        raise InputError(f"tolerance must be >= 0 cells, got {tolerance}")
+    if not isinstance(a, OccupancyGrid) or not isinstance(b, OccupancyGrid):
+        raise InputError("overlap_score compares two OccupancyGrid maps")
+    if not isinstance(transform, Transform2D):
+        raise InputError(f"transform must be a Transform2D, got {show(transform)}")
     occ_b = b.occupied_points()
     if len(occ_b) == 0:
         return 0.0, 0
@@ -303,8 +337,17 @@ def refine_points(reference: np.ndarray, moving: np.ndarray, initial: Transform2
     3 cells) and ``turn`` rad either way. This takes an alignment found from the unique poses'
     masks to sub-cell accuracy.
     """
+    resolution = _cell_size(resolution)
+    reference, moving = _points(reference, "reference"), _points(moving, "moving")
+    if not isinstance(initial, Transform2D):
+        raise InputError(f"initial must be a Transform2D, got {show(initial)}")
+    if len(moving) == 0:
+        raise InputError("an empty moving mask: no scan end points to align")
     fine = resolution / 2.0
-    reach = 3 * resolution if reach is None else reach
+    reach = 3 * resolution if reach is None else number(reach, "reach")
+    turn = number(turn, "turn")
+    if reach < 0 or turn < 0:
+        raise InputError(f"reach and turn must be >= 0, got {show(reach)} m and {show(turn)} rad")
     fld = make_field(reference, fine, sigma=config.sigma)
     mov = dedupe_points(moving, fine)
     x0 = np.array(initial.to_paper())

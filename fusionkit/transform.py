@@ -43,7 +43,11 @@ class Transform2D:
     theta: float = 0.0
 
     def __post_init__(self):
-        x, y, theta = float(self.x), float(self.y), float(self.theta)
+        try:
+            x, y, theta = float(self.x), float(self.y), float(self.theta)
+        except (TypeError, ValueError):
+            raise InputError(f"a transform's x, y, theta must be numbers, got "
+                             f"{self.x!r}, {self.y!r}, {self.theta!r}") from None
         for name, v in (("x", x), ("y", y), ("theta", theta)):
             if not math.isfinite(v):
                 raise InputError(f"transform {name} must be finite, got {v}")
@@ -112,6 +116,8 @@ class Transform2D:
     def __call__(self, points) -> np.ndarray:
         """Apply to points of shape ``(2,)`` or ``(N, 2)`` (metres); returns float64 array."""
         p = np.asarray(points, dtype=float)
+        if p.ndim == 0 or p.shape[-1] != 2:
+            raise InputError(f"a transform applies to points of shape (2,) or (N, 2), got shape {p.shape}")
         c, s = math.cos(self.theta), math.sin(self.theta)
         x, y = p[..., 0], p[..., 1]
         return np.stack([c * x - s * y + self.x, s * x + c * y + self.y], axis=-1)
@@ -119,6 +125,8 @@ class Transform2D:
     def apply_pose(self, poses) -> np.ndarray:
         """Apply to poses ``(N, 3)`` ``(x, y, heading)``: positions moved, headings turned."""
         p = np.asarray(poses, dtype=float)
+        if p.ndim == 0 or p.shape[-1] != 3:
+            raise InputError(f"apply_pose takes poses of shape (3,) or (N, 3), got shape {p.shape}")
         out = np.empty_like(p)
         out[..., :2] = self(p[..., :2])
         out[..., 2] = wrap_angle(p[..., 2] + self.theta)

@@ -100,3 +100,35 @@ def test_more_seeds_than_particles_fill_the_swarm_with_the_best():
     assert len(al.seeds) == 5
     dt, dr = al.transform.error_to(truth)
     assert dt < 0.1 and dr < 0.02
+
+
+def test_bad_points_resolution_or_tolerance_are_one_clear_error():
+    """They raised IndexError, OverflowError or a numpy ValueError, or were taken silently: a
+    one-column moving mask was aligned, and a negative ``tolerance`` dilated ``a``'s walls until
+    they filled the map (scipy's ``iterations < 1``), so every placement scored 1."""
+    import pytest
+
+    from fusionkit.alignment import refine_points
+    from fusionkit.errors import InputError
+    pts = _room_points()
+    cases = [((pts, pts, 0.0), "resolution must be > 0"),
+             ((pts, pts, float("nan")), "resolution must be a finite number"),
+             ((pts[:, :1], pts, 0.1), r"reference must be an \(N, 2\) array.*shape \(\d+, 1\)"),
+             ((pts, pts[:, :1], 0.1), r"moving must be an \(N, 2\) array"),
+             ((pts, np.full((3, 2), np.nan), 0.1), "moving holds NaN")]
+    for args, said in cases:
+        with pytest.raises(InputError, match=said):
+            align_points(*args, seed=0)
+    with pytest.raises(InputError, match="reach and turn must be >= 0"):
+        refine_points(pts, pts, Transform2D(), 0.1, reach=-0.1, seed=0)
+    with pytest.raises(InputError, match="initial must be a Transform2D"):
+        refine_points(pts, pts, (0.0, 0.0, 0.0), 0.1, seed=0)
+    d = np.full((40, 40), -1, np.int8)
+    d[5:35, 5:35] = 0
+    d[5, 5:35] = d[34, 5:35] = 100
+    g = OccupancyGrid(d, 0.1)
+    far = Transform2D(0.0, 1.5, 0.0)               # b's walls 15 cells off a's walls
+    assert overlap_score(g, g, far, tolerance=1)[0] < 0.5
+    for tol, said in ((-1, "tolerance must be >= 0"), (1.5, "tolerance must be a whole number")):
+        with pytest.raises(InputError, match=said):
+            overlap_score(g, g, far, tolerance=tol)

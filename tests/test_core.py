@@ -229,3 +229,18 @@ def test_a_bad_grid_or_transform_is_a_fusionkit_error():
         OccupancyGrid(np.zeros((2, 2)), 0.1, (0.0, math.nan, 0.0))
     with pytest.raises(FusionkitError, match="finite"):
         Transform2D(math.nan, 0.0, 0.0)
+
+
+def test_a_transform_refuses_points_and_poses_of_the_wrong_shape():
+    """A scalar raised IndexError; (N, 3) points were moved by their first two columns and the
+    third dropped without a word; a non-number raised a plain ValueError."""
+    t = Transform2D(1.0, 2.0, 0.5)
+    for bad in (3.0, np.zeros((4, 3))):
+        with pytest.raises(InputError, match=r"points of shape \(2,\) or \(N, 2\)"):
+            t(bad)
+    with pytest.raises(InputError, match=r"poses of shape \(3,\) or \(N, 3\)"):
+        t.apply_pose(np.zeros((4, 2)))
+    with pytest.raises(InputError, match="must be numbers"):
+        Transform2D("a", 0.0, 0.0)
+    assert t(np.zeros((0, 2))).shape == (0, 2)
+    np.testing.assert_allclose(t([0.0, 0.0]), [1.0, 2.0])
