@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._jit import njit
+from ._validate import whole
 from .errors import InputError
 from .scanlog import ScanLog
 
@@ -151,12 +152,14 @@ def find_unique_poses(log: ScanLog, *, sub_sec: int = 5, delta: float | None = N
     -------
     UniquePoses
     """
+    sub_sec = whole(sub_sec, "sub_sec")
     if sub_sec < 1:
         raise InputError(f"sub_sec must be >= 1 pose, got {sub_sec}")
     n = log.n_scans
     if n < 2 * sub_sec + 1:
-        raise InputError(f"a robot with {n} poses has no full section of 2*sub_sec+1 = "
-                         f"{2 * sub_sec + 1} poses; record more poses or lower sub_sec")
+        raise InputError(f"a robot with {n} poses has no pose with a full section of 2*sub_sec = "
+                         f"{2 * sub_sec} scans (that needs at least {2 * sub_sec + 1} poses); "
+                         f"record more poses or lower sub_sec")
     if delta is None and (target is None or target < 1):
         raise InputError("give either delta (a threshold) or target (a number of unique poses >= 1)")
     if delta is not None and not (isinstance(delta, Real) and not isinstance(delta, bool)

@@ -76,8 +76,11 @@ def test_fixed_delta_follows_algorithm_1_line_15():
 
 def test_too_few_poses_for_a_section_is_a_clear_error():
     log = _log(np.ones((8, 32), np.float32))
-    with pytest.raises(InputError, match="sub_sec"):
+    with pytest.raises(InputError, match=r"8 poses has no pose with a full section of 2\*sub_sec = 10 "
+                                         r"scans \(that needs at least 11 poses\)"):
         find_unique_poses(log, sub_sec=5)
+    with pytest.raises(InputError, match="sub_sec must be a whole number"):
+        find_unique_poses(log, sub_sec="2")       # a TypeError from the comparison before
 
 
 def test_relative_heading_recovers_a_turn():
