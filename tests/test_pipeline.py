@@ -111,6 +111,19 @@ def test_a_grid_with_no_cell_is_refused_with_its_reason_by_every_method(method):
     assert not p.merged and p.transform is None and "no known cell" in p.reason, p
 
 
+@pytest.mark.parametrize("with_scans", [True, False])
+def test_a_map_without_walls_is_left_out_by_the_papers_method_and_the_rest_merged(sim, with_scans):
+    """spectral-pso ended the whole merge with "an empty moving mask" (naming no map) when one
+    map had no wall, as a SLAM map has at start-up; every other method left that map out."""
+    grids = [r.grid for r in sim.robots]
+    grids[1] = grids[1].with_data(np.where(grids[1].data >= 50, 0, grids[1].data))
+    res = merge(grids, scans=[r.scans for r in sim.robots] if with_scans else None,
+                config=MergeConfig(method="spectral-pso", seed=1))
+    gone = res.placements[1]
+    assert not gone.merged and gone.reason == "it holds no wall (occupied cell) to place it by"
+    assert res.placements[0].merged and res.placements[2].merged
+
+
 def test_maps_of_different_worlds_are_not_merged():
     a = simulate(make_world("office", seed=1), SimulationConfig(robots=1, poses=800, seed=1)).robots[0]
     b = simulate(make_world("cave", seed=2), SimulationConfig(robots=1, poses=800, seed=2)).robots[0]

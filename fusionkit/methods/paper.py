@@ -161,7 +161,8 @@ class SpectralPSO:
 
             emit(MergeEvent("align", si, len(plan.steps), label, (anchor, new)))
             mov_pts = mask_points(logs[new], sorted(mov_idx))
-            if not ref_pts or len(mov_pts) == 0:
+            if not ref_pts or len(mov_pts) == 0 or not grids[new].occupied_mask().any():
+                # a map without walls is left out (its reason is the pipeline's), not the merge
                 steps.append(MergeStep(anchor, new, None, None, 0.0, 0, False, 0))
                 reasons[new] = "no matched scan end points to align"
                 continue
