@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
+from .scanlog import _own
 from .transform import Transform2D
 
 __all__ = ["OccupancyGrid", "UNKNOWN", "FREE", "OCCUPIED"]
@@ -26,7 +27,10 @@ OCCUPIED = 100
 def _check_cells(raw: np.ndarray) -> None:
     """Refuse cell values an int8 grid cannot take as they are (an image's 0-255, probabilities
     in 0..1, NaN), with what to do instead."""
-    if raw.dtype.kind not in "iubf":
+    if raw.dtype.kind == "b":
+        raise InputError("grid data is a boolean mask: give cells -1 unknown, 0 free, 100 occupied "
+                         "(for a wall mask, np.where(mask, 100, 0))")
+    if raw.dtype.kind not in "iuf":
         raise InputError(f"grid data must be numbers (-1 unknown, 0 free, 100 occupied), got {raw.dtype}")
     if raw.dtype.kind == "f":
         if not np.isfinite(raw).all():
@@ -61,16 +65,27 @@ class OccupancyGrid:
     name: str = field(default="", compare=False)
 
     def __post_init__(self):
-        raw = np.asarray(self.data)
-        if raw.dtype != np.int8 and raw.size:
+        try:
+            raw = np.asarray(self.data)
+        except ValueError:
+            raise InputError("grid data must be a 2-D array (rows, cols); rows of unequal length "
+                             "were given") from None
+        if raw.size:
             _check_cells(raw)   # cast as they are, 200 wrapped to -56 and 0.9 fell to 0 (free)
         data = np.ascontiguousarray(raw, dtype=np.int8)
+        data = _own(data, raw)
         if data.ndim != 2:
             raise InputError(f"grid data must be 2-D (rows, cols), got shape {data.shape}")
-        res = float(self.resolution)
+        try:
+            res = float(self.resolution)
+        except (TypeError, ValueError):
+            res = math.nan
         if not (res > 0 and math.isfinite(res)):
-            raise InputError(f"grid resolution must be a positive number of metres, got {self.resolution}")
-        origin = tuple(float(v) for v in self.origin)
+            raise InputError(f"grid resolution must be a positive number of metres, got {self.resolution!r}")
+        try:
+            origin = tuple(float(v) for v in self.origin)
+        except (TypeError, ValueError):
+            raise InputError(f"grid origin must be (x, y, yaw) numbers, got {self.origin!r}") from None
         if len(origin) == 2:
             origin = (*origin, 0.0)
         if len(origin) != 3 or not all(math.isfinite(v) for v in origin):

@@ -33,6 +33,18 @@ MAX_SCAN_BYTES = 2_000_000_000
 _ZIP_SIGNATURES = (b"PK\x03\x04", b"PK\x05\x06")
 
 
+def _own(array: np.ndarray, given) -> np.ndarray:
+    """``array`` (made from ``given``), copied when it is the caller's array or a view of one
+    that is writeable: freezing it would freeze theirs, and their writes would change it."""
+    if isinstance(given, np.ndarray) and np.may_share_memory(array, given):
+        base = given
+        while isinstance(base, np.ndarray):
+            if base.flags.writeable:
+                return array.copy()
+            base = base.base
+    return array
+
+
 @dataclass(frozen=True, eq=False)
 class ScanLog:
     """Poses and 2-D LIDAR ranges of one robot, in its own map frame.
@@ -97,6 +109,12 @@ class ScanLog:
         if np.abs(poses[:, :2]).max(initial=0.0) > MAX_COORDINATE:
             raise ScanLogError(f"poses lie more than {MAX_COORDINATE:g} m from the origin; the log "
                                f"is corrupt or not in metres")
+        span = abs(self.angle_increment) * (ranges.shape[1] - 1)
+        if span > 2 * math.pi + abs(self.angle_increment) or abs(self.angle_min) > 2 * math.pi:
+            raise ScanLogError(f"the beams span {span:.6g} rad from angle_min {self.angle_min:.6g} rad, "
+                               f"more than a full turn: give angle_min and angle_increment in radians")
+        # the caller's arrays (or views of them) are neither frozen nor aliased
+        poses, ranges = (_own(a, getattr(self, name)) for a, name in ((poses, "poses"), (ranges, "ranges")))
         poses.setflags(write=False)
         ranges.setflags(write=False)
         object.__setattr__(self, "poses", poses)

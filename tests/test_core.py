@@ -244,3 +244,33 @@ def test_a_transform_refuses_points_and_poses_of_the_wrong_shape():
         Transform2D("a", 0.0, 0.0)
     assert t(np.zeros((0, 2))).shape == (0, 2)
     np.testing.assert_allclose(t([0.0, 0.0]), [1.0, 2.0])
+
+
+def test_a_grid_refuses_masks_and_out_of_range_int8_and_never_freezes_the_callers_array():
+    """A bool wall mask became all free; an int8 image's walls (0) became free and its other
+    pixels unknown (-56...); the caller's own array was made read-only, and a grid built from a
+    view changed when the array under it did."""
+    with pytest.raises(InputError, match=r"boolean mask.*np.where\(mask, 100, 0\)"):
+        OccupancyGrid(np.ones((3, 3), bool), 0.1)
+    with pytest.raises(InputError, match="values from -56 to 127"):
+        OccupancyGrid(np.array([[127, -56]], np.int8), 0.1)
+    mine = np.zeros((4, 4), np.int8)
+    g = OccupancyGrid(mine[:, :], 0.1)
+    mine[0, 0] = 100                                    # the caller's array stays theirs
+    assert g.data[0, 0] == 0 and not g.data.flags.writeable
+    assert OccupancyGrid(g.data, 0.1).data is g.data    # a frozen grid's cells are not copied
+    for bad, said in ((None, "resolution must be a positive number"), ("x", "resolution")):
+        with pytest.raises(InputError, match=said):
+            OccupancyGrid(mine, bad)
+    with pytest.raises(InputError, match=r"origin must be \(x, y, yaw\) numbers"):
+        OccupancyGrid(mine, 0.1, "abc")
+
+
+def test_a_scan_log_keeps_its_own_arrays_and_refuses_angles_in_degrees():
+    poses, ranges = np.zeros((12, 3)), np.full((12, 8), 2.0, np.float32)
+    log = ScanLog(poses, ranges, -math.pi, 2 * math.pi / 8, 8.0)
+    poses[0, 0] = 5.0
+    assert poses.flags.writeable and log.poses[0, 0] == 0.0
+    assert np.shares_memory(log.subset(slice(0, 4)).ranges, log.ranges)   # frozen: shared
+    with pytest.raises(ScanLogError, match="more than a full turn: give angle_min and angle_increment in radians"):
+        ScanLog(poses, ranges, -180.0, 4.0, 8.0)

@@ -223,9 +223,9 @@ def test_saved_files_are_what_map_saver_writes(tmp_path):
 
 
 def test_probabilities_are_saved_as_their_state(tmp_path):
-    grid = OccupancyGrid(np.array([[1, 49, 50, 99, -1, -128]], np.int8), 0.1)
+    grid = OccupancyGrid(np.array([[1, 49, 50, 99, -1, 0]], np.int8), 0.1)
     save_map(grid, tmp_path / "p.yaml")
-    assert load_map(tmp_path / "p.yaml").data.tolist() == [[0, 0, 100, 100, -1, -1]]
+    assert load_map(tmp_path / "p.yaml").data.tolist() == [[0, 0, 100, 100, -1, 0]]
 
 
 def test_tiny_and_huge_numbers_survive_the_yaml(tmp_path):

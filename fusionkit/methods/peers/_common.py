@@ -261,5 +261,5 @@ def warp_cells(b_data: np.ndarray, cell_transform: Transform2D, shape) -> np.nda
     """Cells of grid ``b_data`` sampled (nearest neighbour, unknown outside) onto a grid of
     ``shape`` whose cell frame ``cell_transform`` maps ``b``'s cell frame into."""
     src = OccupancyGrid(b_data, 1.0)
-    target = OccupancyGrid(np.empty(shape, np.int8), 1.0)
+    target = OccupancyGrid(np.full(shape, -1, np.int8), 1.0)
     return resample(src, cell_transform, target).data
