@@ -228,6 +228,13 @@ class AlignmentConfig:
     max_seeds: int = 20
 
     def __post_init__(self):
+        if not isinstance(self.pso, PSOConfig):
+            raise InputError(f"AlignmentConfig's pso must be a PSOConfig, got {type(self.pso).__name__}")
+        if not isinstance(self.seeded, (bool, np.bool_)):
+            raise InputError(f"seeded must be True or False, got {show(self.seeded)}")
+        object.__setattr__(self, "seeded", bool(self.seeded))
+        object.__setattr__(self, "sigma", number(self.sigma, "sigma"))
+        object.__setattr__(self, "max_seeds", whole(self.max_seeds, "max_seeds"))
         if self.sigma < 0:
             raise InputError(f"sigma must be >= 0 cells, got {self.sigma}")
         if self.max_seeds < 0:

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ._jit import njit
+from ._validate import number, whole
 from .errors import InputError
 from .grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from .scanlog import ScanLog
@@ -55,10 +56,27 @@ class MappingConfig:
     margin: int = 5
 
     def __post_init__(self):
-        if not (self.resolution > 0 and math.isfinite(self.resolution)):
+        values = {name: number(getattr(self, name), name)
+                  for name in ("resolution", "l_occ", "l_free", "l_clamp", "occ_thresh", "free_thresh")}
+        for name, v in values.items():
+            object.__setattr__(self, name, v)
+        if values["resolution"] <= 0:
             raise InputError(f"mapping resolution must be > 0 m, got {self.resolution}")
         if self.l_occ <= 0 or self.l_free <= 0:
             raise InputError("l_occ and l_free must be > 0")
+        if values["l_clamp"] <= 0:
+            raise InputError(f"l_clamp must be > 0 (log-odds are clamped to [-l_clamp, l_clamp]), "
+                             f"got {values['l_clamp']:g}")
+        for name in ("occ_thresh", "free_thresh"):
+            if not 0 <= values[name] < values["l_clamp"]:
+                # at or over the clamp no cell is ever occupied (free); below 0, the unsure are
+                raise InputError(f"{name} must be >= 0 and below l_clamp ({values['l_clamp']:g}), "
+                                 f"got {values[name]:g}")
+        if self.max_free_range is not None:
+            object.__setattr__(self, "max_free_range", number(self.max_free_range, "max_free_range"))
+            if self.max_free_range < 0:   # 0: a no-return beam clears nothing
+                raise InputError(f"max_free_range must be >= 0 m (or None), got {self.max_free_range:g}")
+        object.__setattr__(self, "margin", whole(self.margin, "margin"))
         if self.margin < 0:
             raise InputError("margin must be >= 0 cells")
 
@@ -136,6 +154,12 @@ def build_grid(log: ScanLog, config: MappingConfig = MappingConfig(), *, name: s
     ``max_free_range``) plus ``config.margin`` cells, and its origin is snapped to the
     resolution.
     """
+    if not isinstance(log, ScanLog):
+        raise InputError(f"build_grid takes a ScanLog (poses and ranges), got {type(log).__name__}")
+    if not isinstance(config, MappingConfig):
+        raise InputError(f"build_grid's config must be a MappingConfig, got {type(config).__name__}")
+    if log.n_scans == 0:
+        raise InputError("the scan log holds no scan: there is nothing to map")
     res = config.resolution
     free_range = config.max_free_range if config.max_free_range is not None else log.range_max
     ranges = np.where(np.isfinite(log.ranges) & (log.ranges <= log.range_max), log.ranges,

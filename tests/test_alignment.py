@@ -132,3 +132,18 @@ def test_bad_points_resolution_or_tolerance_are_one_clear_error():
     for tol, said in ((-1, "tolerance must be >= 0"), (1.5, "tolerance must be a whole number")):
         with pytest.raises(InputError, match=said):
             overlap_score(g, g, far, tolerance=tol)
+
+
+def test_alignment_settings_of_the_wrong_kind_are_refused():
+    """sigma=NaN softened the mask to nothing (the paper's method then refused a placeable
+    pair without an error); a dict as pso, or "no" as seeded (taken as True), went through."""
+    import pytest
+
+    from fusionkit.errors import InputError
+    for kw, said in ((dict(sigma=math.nan), "sigma must be a finite number"),
+                     (dict(pso={}), "pso must be a PSOConfig"),
+                     (dict(seeded="no"), "seeded must be True or False"),
+                     (dict(max_seeds=1.5), "max_seeds must be a whole number")):
+        with pytest.raises(InputError, match=said):
+            AlignmentConfig(**kw)
+    assert AlignmentConfig(seeded=np.bool_(False)).seeded is False

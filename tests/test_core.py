@@ -274,3 +274,22 @@ def test_a_scan_log_keeps_its_own_arrays_and_refuses_angles_in_degrees():
     assert np.shares_memory(log.subset(slice(0, 4)).ranges, log.ranges)   # frozen: shared
     with pytest.raises(ScanLogError, match="more than a full turn: give angle_min and angle_increment in radians"):
         ScanLog(poses, ranges, -180.0, 4.0, 8.0)
+
+
+def test_mapping_settings_that_would_build_a_wrong_map_are_refused():
+    """NaN or a negative clamp built an all-unknown or mostly occupied map without a word, a
+    threshold over the clamp a map without walls, a NaN free range a bare ValueError."""
+    for kw, said in ((dict(l_clamp=math.nan), "l_clamp must be a finite number"),
+                     (dict(l_clamp=-1.0), "l_clamp must be > 0"),
+                     (dict(occ_thresh=100.0), r"occ_thresh must be >= 0 and below l_clamp \(6\)"),
+                     (dict(free_thresh=-0.5), "free_thresh must be >= 0"),
+                     (dict(max_free_range=math.nan), "max_free_range must be a finite number"),
+                     (dict(margin=2.5), "margin must be a whole number")):
+        with pytest.raises(InputError, match=said):
+            MappingConfig(**kw)
+    poses, ranges = np.zeros((12, 3)), np.full((12, 8), 2.0, np.float32)
+    log = ScanLog(poses, ranges, -math.pi, 2 * math.pi / 8, 8.0)
+    with pytest.raises(InputError, match="holds no scan"):
+        build_grid(log.subset(slice(0, 0)))
+    with pytest.raises(InputError, match="takes a ScanLog"):
+        build_grid(ranges)
