@@ -21,7 +21,8 @@ from __future__ import annotations
 import math
 import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
+from numbers import Real
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -112,14 +113,26 @@ class MergeConfig:
     max_false_merge: float = 0.01
 
     def __post_init__(self):
+        for name in ("max_false_merge", "theta", "accept", "delta"):
+            v = getattr(self, name)       # numpy's numbers are numbers; "0.9" and True are not
+            if isinstance(v, Real) and not isinstance(v, (bool, np.bool_)):
+                object.__setattr__(self, name, float(v))
         v = self.max_false_merge
-        if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 < v < 1.0):
+        if not (isinstance(v, float) and 0.0 < v < 1.0):
             raise InputError(f"max_false_merge is a risk in (0, 1) (e.g. 0.01), got {v!r}")
-        if self.method not in METHODS:
+        if not isinstance(self.method, str) or self.method not in METHODS:
             raise InputError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
+        if not isinstance(self.alignment, AlignmentConfig):
+            raise InputError(f"alignment must be an AlignmentConfig(...), got {type(self.alignment).__name__}")
+        if not (self.consensus is None or isinstance(self.consensus, ConsensusConfig)):
+            raise InputError(f"consensus must be a ConsensusConfig(...) or None, got "
+                             f"{type(self.consensus).__name__}")
+        if not isinstance(self.refine, (bool, np.bool_)):
+            raise InputError(f"refine must be True or False, got {self.refine!r}")
+        object.__setattr__(self, "refine", bool(self.refine))
         for name in ("theta", "accept"):      # "0.9" raised a TypeError deep in the comparison
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            if not isinstance(v, float) or not math.isfinite(v):
                 raise InputError(f"{name} must be a number, got {v!r}")
         for name in ("sub_sec", "unique_count", "min_overlap_cells", "virtual_poses", "reference"):
             if not _is_int(getattr(self, name)):  # 1.5 was taken
@@ -134,6 +147,8 @@ class MergeConfig:
             raise InputError(f"delta is a divergence threshold >= 0 (or None), got {self.delta!r}")
         if self.delta is None and self.unique_count < 1:
             raise InputError(f"unique_count must be >= 1, got {self.unique_count}")
+        if self.reference < 0:
+            raise InputError(f"reference is the index of a map (0 for the first), got {self.reference}")
         if not 0.0 <= self.accept <= 1.0:
             raise InputError(f"accept is an overlap fraction in [0, 1], got {self.accept}")
         if self.min_overlap_cells < 0 or self.virtual_poses < 20 or self.sub_sec < 1:
@@ -145,7 +160,12 @@ class MergeConfig:
 
     def with_pso(self, **kw) -> "MergeConfig":
         """A copy with some PSO settings changed (particles, iterations, w, c1, c2, ...)."""
-        return replace(self, alignment=replace(self.alignment, pso=replace(self.alignment.pso, **kw)))
+        try:
+            pso = replace(self.alignment.pso, **kw)
+        except TypeError:
+            known = ", ".join(f.name for f in fields(PSOConfig))
+            raise InputError(f"with_pso takes PSO settings ({known}); got {', '.join(kw)}") from None
+        return replace(self, alignment=replace(self.alignment, pso=pso))
 
 
 @dataclass(frozen=True)
@@ -220,6 +240,8 @@ class MergeResult:
         Wall time per stage and ``"total"``.
     groups : tuple of MapGroup
         Groups of maps left out that link among themselves, largest first.
+    inputs : tuple of str
+        The paths the maps were given as (empty when they were given as grids).
     """
 
     grid: OccupancyGrid
@@ -236,6 +258,7 @@ class MergeResult:
     config: MergeConfig
     seconds: dict = field(default_factory=dict)
     groups: tuple = ()
+    inputs: tuple = ()
 
     @property
     def transforms(self) -> list:
@@ -246,12 +269,19 @@ class MergeResult:
         return all(p.merged for p in self.placements)
 
     def report(self, inputs: Sequence[str] | None = None, output: str | None = None) -> dict:
-        """The CONTRACTS section 6 report (``inputs`` as given on the command line); a map left
+        """The CONTRACTS section 6 report (``inputs`` as given on the command line, by default
+        the paths given to :func:`merge`, or the maps' names when it was given grids); a map left
         out also carries the ``reason`` it was left out, a map in a group its ``group`` (and,
         outside the reference's group, ``group_transform`` and ``group_reference``); the groups'
         fused maps are listed under ``group_outputs`` (paths from :func:`group_output_paths`,
         none without ``output``)."""
-        names = list(inputs) if inputs is not None else [p.name for p in self.placements]
+        if isinstance(inputs, (str, bytes, os.PathLike)):
+            raise InputError("inputs must be a list of one name or path per map, got one")
+        if inputs is not None:
+            names = [os.fspath(n) for n in inputs]
+        else:
+            names = list(self.inputs) or [p.name for p in self.placements]
+        output = None if output is None else os.fspath(output)
         if len(names) != len(self.placements):
             raise InputError(f"give one input name per map: {len(names)} for {len(self.placements)} maps")
         maps = []
@@ -399,12 +429,20 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     """
     t_start = time.perf_counter()
     seconds: dict = {}
+    if isinstance(maps, (str, bytes, os.PathLike, OccupancyGrid)):
+        raise InputError("maps must be a list of two or more maps (OccupancyGrid objects or paths "
+                         "to map YAML files), got one")
+    if not isinstance(config, MergeConfig):
+        raise InputError(f"config must be a MergeConfig(...), got {type(config).__name__}")
+    if callback is not None and not callable(callback):
+        raise InputError(f"callback must be callable (it is called with each MergeEvent), got {callback!r}")
     maps = list(maps)
     if len(maps) < 2:
         raise InputError(f"merging needs at least two maps, got {len(maps)}")
     if not 0 <= config.reference < len(maps):
         raise InputError(f"reference index {config.reference} is not one of the {len(maps)} maps")
-    if all(isinstance(m, (str, os.PathLike)) for m in maps):
+    from_files = all(isinstance(m, (str, os.PathLike)) for m in maps)
+    if from_files:
         grids, file_scans = load_inputs(maps)
         scans = file_scans if scans is None else scans
     elif all(isinstance(m, OccupancyGrid) for m in maps):
@@ -414,6 +452,14 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     scans = list(scans) if scans is not None else [None] * len(grids)
     if len(scans) != len(grids):
         raise InputError(f"{len(scans)} scan logs for {len(grids)} maps: give one per map (None for none)")
+    for k, log in enumerate(scans):
+        if log is not None and not isinstance(log, ScanLog):
+            raise InputError(f"scans[{k}] is a {type(log).__name__}: give ScanLog objects (load_scans "
+                             f"reads a .scans.npz) or None for a map without scans")
+    if grids is maps and len({id(g) for g in grids}) < len(grids):
+        k = next(i for i, g in enumerate(grids) if any(g is h for h in grids[:i]))
+        raise InputError(f"map {k + 1} is the same OccupancyGrid object as an earlier map; give "
+                         f"each map once (a map merged with itself is placed on itself)")
     names = [g.name or f"map_{k + 1}" for k, g in enumerate(grids)]
     # a map read from a file is named as it was given, as every other error about it is
     ref_name = os.fspath(maps[config.reference]) if grids is not maps else names[config.reference]
@@ -460,4 +506,5 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     emit(MergeEvent("done", 1, 1, "done"))
     return MergeResult(fused.grid, placements, placed.links, placed.order, fused, placed.unique,
                        placed.plan, placed.agreements, placed.steps, placed.scans, placed.virtual,
-                       config, seconds, groups)
+                       config, seconds, groups,
+                       tuple(os.fspath(m) for m in maps) if from_files else ())

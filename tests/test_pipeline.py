@@ -355,3 +355,42 @@ def test_paper_method_never_claims_a_map_the_fused_map_lacks():
     assert {0, 1} <= merged
     for anchor, new in res.fusion_order:
         assert anchor in merged and new in merged
+
+
+def test_wrong_kinds_of_merge_arguments_are_one_clear_error(sim):
+    """A dict as config, a path string as a scan log, a number as callback ended in an
+    AttributeError or TypeError deep in the method; one path was split into characters ("/: the
+    same map file is given twice"); the same grid object twice was merged onto itself."""
+    a, b = sim.robots[0].grid, sim.robots[1].grid
+    for args, kw, said in ((("robot_1.yaml",), {}, "a list of two or more maps"),
+                           (([a, b],), dict(config={"method": "consensus"}), r"config must be a MergeConfig"),
+                           (([a, b],), dict(scans=["a.scans.npz", None]), r"scans\[0\] is a str"),
+                           (([a, b],), dict(callback=5), "callback must be callable"),
+                           (([a, a],), {}, "map 2 is the same OccupancyGrid object")):
+        with pytest.raises(InputError, match=said):
+            merge(*args, **kw)
+
+
+def test_settings_take_numpy_numbers_and_refuse_wrong_kinds():
+    """np.float32(0.9) was refused as "not a number"; refine="no" counted as True; a dict as
+    alignment failed later in the merge; a misspelt PSO setting raised a TypeError."""
+    c = MergeConfig(theta=np.float32(0.5), max_false_merge=np.float64(0.02))
+    assert isinstance(c.theta, float) and c.max_false_merge == 0.02
+    for kw, said in ((dict(refine="no"), "refine must be True or False"),
+                     (dict(alignment={}), r"alignment must be an AlignmentConfig"),
+                     (dict(consensus={}), r"consensus must be a ConsensusConfig"),
+                     (dict(reference=-1), "reference is the index of a map")):
+        with pytest.raises(InputError, match=said):
+            MergeConfig(**kw)
+    with pytest.raises(InputError, match=r"with_pso takes PSO settings \(particles, .*got particle"):
+        MergeConfig().with_pso(particle=40)
+
+
+def test_the_report_gives_the_paths_merge_was_given_and_can_be_written_as_json(run_dir):
+    """It gave the maps' stems, and kept Path objects json could not write."""
+    paths = [run_dir / "robot_1.yaml", run_dir / "robot_2.yaml"]
+    report = merge(paths).report(output=Path("out.yaml"))
+    assert [m["input"] for m in report["maps"]] == [str(p) for p in paths]
+    assert report["output"] == "out.yaml" and json.loads(json.dumps(report)) == report
+    with pytest.raises(InputError, match="one name or path per map"):
+        merge(paths).report(inputs="ab")
