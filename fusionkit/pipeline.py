@@ -31,15 +31,14 @@ import numpy as np
 from .alignment import AlignmentConfig
 from .errors import FusionkitError, InputError
 from .fusion import FusedMap, fuse_maps
-from .grid import UNKNOWN, OccupancyGrid
-from .mapping import MAX_CELLS
+from .grid import OccupancyGrid
 from .methods import METHODS, get_method
 from .methods.base import MergeEvent, MergeStep, PreparedMaps
 from .methods.consensus import ConsensusConfig
 from .pairing import FusionPlan
 from .pso import PSOConfig, _is_int
-from .resample import canvas_for, resample, transformed_bounds
-from .scanlog import ScanLog, load_scans, scans_path_for
+from ._merge_inputs import _same_resolution, _unusable, load_inputs
+from .scanlog import ScanLog
 from .transform import Transform2D
 
 __all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MapGroup", "MergeStep", "MergeResult",
@@ -319,84 +318,6 @@ def group_output_paths(output: str | os.PathLike, count: int) -> list[Path]:
     the fused maps of ``count`` groups are written (CONTRACTS section 6)."""
     out = Path(output)
     return [out.with_name(f"{out.stem}.group{k}{out.suffix}") for k in range(1, count + 1)]
-
-
-def load_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[OccupancyGrid], list[ScanLog | None]]:
-    """Load maps (ROS map_server YAML) and, where ``NAME.scans.npz`` stands beside, their scans."""
-    from .mapio import load_map
-
-    _once(paths)
-    grids, scans = [], []
-    for p in paths:
-        grids.append(load_map(p))
-        sp = scans_path_for(p)
-        scans.append(load_scans(sp) if sp.is_file() else None)
-    return grids, scans
-
-
-def _once(paths) -> None:
-    """Refuse a map file given twice (by one path or two: a link, ``a/../a``): a map merged
-    with itself is placed on itself, and the report would list one input twice."""
-    seen: dict = {}
-    for k, p in enumerate(paths):
-        try:
-            st = os.stat(p)
-        except OSError:
-            continue  # the loader says what is wrong with it
-        first = seen.setdefault((st.st_dev, st.st_ino), k)
-        if first != k:
-            same = "" if os.fspath(paths[first]) == os.fspath(p) else f" (as {paths[first]})"
-            raise InputError(f"{p}: the same map file is given twice{same}, as maps {first + 1} "
-                             f"and {k + 1}; give each map once")
-    # two YAML files naming one image are one map (merged with itself, it is placed on itself)
-    from .mapio import _protected
-
-    images: dict = {}
-    for k, p in enumerate(paths):
-        for image in _protected([p])[1:]:
-            try:
-                st = os.stat(image)
-            except OSError:
-                continue
-            first = images.setdefault((st.st_dev, st.st_ino), k)
-            if first != k:
-                raise InputError(f"{paths[first]} and {p} (maps {first + 1} and {k + 1}) name "
-                                 f"the same image {image}: they are one map; give it once")
-
-
-def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid]:
-    """Resample every grid to the reference's resolution (nearest neighbour)."""
-    res = grids[ref].resolution
-    out = []
-    for g in grids:
-        if abs(g.resolution - res) <= 1e-9 * res and g.data.size:
-            out.append(g)
-            continue
-        if not g.known_mask().any():
-            # nothing to resample (and no extent worth cells), or no cell at all (an empty image
-            # crashed OpenCV's morphology in the consensus method): one unknown cell at the
-            # reference's cell size, which the method refuses with its reason
-            out.append(OccupancyGrid(np.full((1, 1), UNKNOWN, np.int8), res, g.origin, g.name))
-            continue
-        x0, y0, x1, y1 = transformed_bounds(g, Transform2D.identity())
-        rows, cols = math.ceil((y1 - y0) / res), math.ceil((x1 - x0) / res)
-        if rows * cols > MAX_CELLS:
-            raise InputError(f"{g.name or 'a map'}: at the reference map's {res:g} m cells this "
-                             f"map of {g.resolution:g} m cells would be {rows} x {cols} cells, more "
-                             f"than the {MAX_CELLS} fusionkit can hold; choose a coarser map as "
-                             "the reference, or crop this one")
-        canvas = canvas_for([g], [Transform2D.identity()], res, margin_cells=0)
-        out.append(resample(g, Transform2D.identity(), canvas))
-    return out
-
-
-def _unusable(grid: OccupancyGrid) -> str:
-    """Why no method can place ``grid`` (the same words whatever the method), or ``""``."""
-    if not grid.known_mask().any():
-        return "it holds no known cell (all unknown): nothing to place it by"
-    if not grid.occupied_mask().any():
-        return "it holds no wall (occupied cell) to place it by"
-    return ""
 
 
 def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,

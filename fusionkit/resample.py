@@ -14,6 +14,7 @@ import numpy as np
 from ._jit import pjit, prange
 from .errors import InputError
 from .grid import UNKNOWN, OccupancyGrid
+from .mapping import MAX_CELLS
 from .transform import Transform2D
 
 __all__ = ["resample", "canvas_for", "transformed_bounds"]
@@ -101,6 +102,14 @@ def canvas_for(grids, transforms, resolution: float, margin_cells: int = 2) -> O
     after its transform, plus a margin; the canvas frame is the transforms' target frame."""
     if isinstance(resolution, bool) or not isinstance(resolution, Real) or not 0 < resolution < math.inf:
         raise InputError(f"the canvas resolution must be a positive number of metres, got {resolution!r}")
+    grids, transforms = list(grids), list(transforms)
+    if len(grids) != len(transforms):
+        raise InputError(f"canvas_for needs one transform per grid, got {len(grids)} grids and "
+                         f"{len(transforms)} transforms")
+    for k, (g, t) in enumerate(zip(grids, transforms)):
+        if not isinstance(g, OccupancyGrid) or not isinstance(t, Transform2D):
+            raise InputError(f"canvas_for takes OccupancyGrid maps and Transform2D transforms; item "
+                             f"{k} is a {type(g).__name__} and a {type(t).__name__}")
     boxes = [transformed_bounds(g, t) for g, t in zip(grids, transforms)]
     boxes = [b for b in boxes if b is not None]
     if not boxes:
@@ -114,6 +123,10 @@ def canvas_for(grids, transforms, resolution: float, margin_cells: int = 2) -> O
     y0 = math.floor((ymin - m) / resolution) * resolution
     cols = int(math.ceil((xmax + m - x0) / resolution))
     rows = int(math.ceil((ymax + m - y0) / resolution))
+    if rows * cols > MAX_CELLS:
+        raise InputError(f"the maps placed so cover {xmax - xmin:.6g} x {ymax - ymin:.6g} m: at "
+                         f"{resolution:g} m cells, {cols} x {rows} cells, more than the {MAX_CELLS} "
+                         f"fusionkit can hold; use a coarser resolution or check the transforms")
     return OccupancyGrid(np.full((rows, cols), UNKNOWN, np.int8), resolution, (x0, y0, 0.0))
 
 

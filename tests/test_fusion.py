@@ -216,3 +216,17 @@ def test_paper_transform_equals_transform2d_from_paper(dx, dy, dphi, seed):
 def test_paper_transform_bad_shape():
     with pytest.raises(InputError):
         apply_paper_transform(np.zeros((3, 3)), 0, 0, 0)
+
+
+def test_a_fused_map_or_canvas_too_large_to_hold_is_refused_before_it_is_allocated():
+    """fuse_maps at 1e-4 m cells asked numpy for 187 GiB (MemoryError); two maps 100 km apart
+    were fused into a 600-million-cell map; a transform fewer than the grids dropped a grid."""
+    from fusionkit.resample import canvas_for
+    from fusionkit.worlds import default_world
+    g = default_world()
+    with pytest.raises(InputError, match="more than the 200000000 fusionkit can hold"):
+        fuse_maps([g, g], [Transform2D(), Transform2D()], resolution=1e-4)
+    with pytest.raises(InputError, match="more than the 200000000 fusionkit can hold"):
+        fuse_maps([g, g], [Transform2D(), Transform2D(1e5, 0.0, 0.0)])
+    with pytest.raises(InputError, match="one transform per grid, got 2 grids and 1"):
+        canvas_for([g, g], [Transform2D()], 0.1)

@@ -96,7 +96,7 @@ def _confidence_against(fused, grid: OccupancyGrid, transform, seed: int) -> flo
     the other held maps (:func:`fusionkit.methods.consensus.placement_confidence`, 0-1: the
     scale of every method's confidence)."""
     from ..methods.consensus import placement_confidence, prepare_maps
-    from ..pipeline import _same_resolution
+    from .._merge_inputs import _same_resolution
 
     if fused is None:
         return 0.0
