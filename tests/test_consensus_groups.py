@@ -184,3 +184,17 @@ def test_a_groups_map_keeps_its_own_cell_size(two_buildings):
     assert result.grid.resolution == pytest.approx(other.resolution)
     alone = merge([one.a, one.b], config=MergeConfig(method="consensus"))
     assert group.grid.known_mask().sum() == pytest.approx(alone.grid.known_mask().sum(), rel=0.05)
+
+
+def test_a_map_left_out_names_the_map_its_reason_is_about():
+    """With three maps, a map left out was given the words of its surest pair, which could be a
+    pair with another map left out, without saying so: both maps read the same reason."""
+    from pathlib import Path
+
+    from fusionkit.pipeline import merge
+    real = Path(__file__).resolve().parents[1] / "maps" / "real"
+    res = merge([real / f"{n}.yaml" for n in ("intel_lab", "mit_stata_basement", "gatech_ilab")])
+    mit, gatech = res.placements[1], res.placements[2]
+    assert not mit.merged and not gatech.merged
+    assert mit.reason.endswith("(against map 3 of those given, its surest pair)"), mit.reason
+    assert gatech.reason.endswith("(against map 2 of those given, its surest pair)"), gatech.reason

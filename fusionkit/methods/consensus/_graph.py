@@ -318,8 +318,13 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
             # the reason of the pair the test found surest (its confidence may have been
             # lowered since: a placement that may slide)
             best = min(mine, key=lambda p: p.nfa, default=None)
-            reasons.append(best.reason if best is not None and best.reason else
-                           "no confident placement against any other map")
+            if best is not None and best.reason:
+                other = best.b if best.a == k else best.a
+                # with three maps or more, which pair the words are about
+                reasons.append(best.reason if n == 2 else
+                               f"{best.reason} (against map {other + 1} of those given, its surest pair)")
+            else:
+                reasons.append("no confident placement against any other map")
     return GraphResult(tuple(transforms), tuple(float(c) for c in conf), tuple(tree),
                        tuple(dropped), tuple(resolved), tuple(reasons), tuple(group),
                        tuple(group_transforms), tuple(float(c) for c in group_conf),
