@@ -63,9 +63,22 @@ class Transform2D:
     @classmethod
     def from_matrix(cls, m) -> "Transform2D":
         """From a 3x3 homogeneous (or 2x3) matrix; the rotation part is orthonormalised."""
-        m = np.asarray(m, dtype=float)
+        try:
+            m = np.asarray(m, dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"expected a 3x3 or 2x3 matrix of numbers, got {m!r}") from None
         if m.shape not in ((3, 3), (2, 3)):
             raise InputError(f"expected a 3x3 or 2x3 matrix, got shape {m.shape}")
+        if not np.isfinite(m).all():
+            raise InputError("the matrix holds NaN or infinite values")
+        if m.shape == (3, 3) and not np.allclose(m[2], (0.0, 0.0, 1.0), atol=1e-6):
+            raise InputError(f"a rigid motion's matrix has the last row 0 0 1, got {m[2].tolist()}")
+        sv = np.linalg.svd(m[:2, :2], compute_uv=False)
+        if np.linalg.det(m[:2, :2]) <= 0 or np.abs(sv - 1.0).max() > 0.01:
+            # atan2 of a reflection or a scaling gives some rotation: not the motion given
+            raise InputError(f"the matrix's 2x2 part is not a rotation (singular values "
+                             f"{sv[0]:.4g}, {sv[1]:.4g}, determinant {np.linalg.det(m[:2, :2]):.4g}): "
+                             f"a reflection or a scaling is not a rigid motion")
         return cls(m[0, 2], m[1, 2], math.atan2(m[1, 0] - m[0, 1], m[0, 0] + m[1, 1]))
 
     @classmethod
@@ -83,11 +96,16 @@ class Transform2D:
         ``x' = (x + dx) cos(dphi) - (y + dy) sin(dphi)``,
         ``y' = (x + dx) sin(dphi) + (y + dy) cos(dphi)``; i.e. ``R(dphi) @ (p + d)``.
         """
+        try:
+            dx, dy, dphi = float(dx), float(dy), float(dphi)
+        except (TypeError, ValueError):
+            raise InputError(f"dx, dy, dphi must be numbers, got {dx!r}, {dy!r}, {dphi!r}") from None
         c, s = math.cos(dphi), math.sin(dphi)
         return cls(c * dx - s * dy, s * dx + c * dy, dphi)
 
     def to_paper(self) -> tuple[float, float, float]:
-        """Inverse of :meth:`from_paper`: ``(dx, dy, dphi)`` with ``self == from_paper(dx, dy, dphi)``."""
+        """Inverse of :meth:`from_paper`: ``(dx, dy, dphi)`` with
+        ``from_paper(dx, dy, dphi).is_close(self)`` (equal up to rounding)."""
         c, s = math.cos(self.theta), math.sin(self.theta)
         return (c * self.x + s * self.y, -s * self.x + c * self.y, self.theta)
 
@@ -135,6 +153,8 @@ class Transform2D:
     # -- comparisons ------------------------------------------------------------------------------
     def error_to(self, other: "Transform2D") -> tuple[float, float]:
         """``(translation error in m, |rotation error| in rad)`` between two transforms."""
+        if not isinstance(other, Transform2D):
+            raise InputError(f"error_to compares with a Transform2D, got {type(other).__name__}")
         return (math.hypot(self.x - other.x, self.y - other.y),
                 abs(float(wrap_angle(self.theta - other.theta))))
 

@@ -293,3 +293,18 @@ def test_mapping_settings_that_would_build_a_wrong_map_are_refused():
         build_grid(log.subset(slice(0, 0)))
     with pytest.raises(InputError, match="takes a ScanLog"):
         build_grid(ranges)
+
+
+def test_a_matrix_that_is_not_a_rigid_motion_is_refused():
+    """A reflection, a scaling and a bad last row each came back as the identity, silently."""
+    for m, said in ((np.diag([1.0, -1.0, 1.0]), "not a rotation"),
+                    (np.diag([2.0, 2.0, 1.0]), "not a rotation"),
+                    (np.array([[1.0, 0, 0], [0, 1, 0], [5, 5, 5]]), "last row 0 0 1")):
+        with pytest.raises(InputError, match=said):
+            Transform2D.from_matrix(m)
+    t = Transform2D(0.3, -2.0, 2.5)
+    assert Transform2D.from_matrix(t.matrix[:2].astype(np.float32)).is_close(t, atol=1e-5)
+    with pytest.raises(InputError, match="must be numbers"):
+        Transform2D.from_paper(None, 2.0, 0.0)
+    with pytest.raises(InputError, match="compares with a Transform2D"):
+        t.error_to((0.0, 0.0, 0.0))
