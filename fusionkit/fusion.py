@@ -50,7 +50,7 @@ def fuse_cells(a, b) -> np.ndarray:
     Raises
     ------
     InputError
-        When the shapes differ.
+        When the shapes differ, or a cell is not a number, NaN or over 100.
 
     Examples
     --------
@@ -62,6 +62,14 @@ def fuse_cells(a, b) -> np.ndarray:
     if a.shape != b.shape:
         raise InputError(f"grids to fuse must have the same shape, got {a.shape} and {b.shape}; "
                          "resample them onto one canvas first")
+    for cells in (a, b):
+        if cells.dtype.kind not in "iuf":
+            raise InputError(f"cells to fuse must be numbers (-1 unknown, 0 free, 100 occupied), "
+                             f"got {cells.dtype}")
+        if cells.size and (np.isnan(cells).any() if cells.dtype.kind == "f" else False):
+            raise InputError("cells to fuse hold NaN; give -1 for unknown cells")
+        if cells.size and cells.max() > 100:
+            raise InputError(f"cells to fuse go up to {cells.max():g}; occupancy is at most 100")
     known_a, occ_a = _three_state(a)
     known_b, occ_b = _three_state(b)
     out = np.full(a.shape, UNKNOWN, np.int8)

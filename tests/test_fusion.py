@@ -230,3 +230,11 @@ def test_a_fused_map_or_canvas_too_large_to_hold_is_refused_before_it_is_allocat
         fuse_maps([g, g], [Transform2D(), Transform2D(1e5, 0.0, 0.0)])
     with pytest.raises(InputError, match="one transform per grid, got 2 grids and 1"):
         canvas_for([g, g], [Transform2D()], 0.1)
+
+
+def test_fuse_cells_refuses_values_no_grid_holds():
+    """NaN was fused as free, 1000 and an image's 255 as occupied, text raised a numpy error."""
+    for bad, said in (([[np.nan]], "hold NaN"), ([[255]], "up to 255"), ([["ab"]], "must be numbers")):
+        with pytest.raises(InputError, match=said):
+            fuse_cells(bad, [[0]])
+    assert fuse_cells([[-5, 100]], [[0, -1]]).tolist() == [[0, 100]]   # any negative is unknown
