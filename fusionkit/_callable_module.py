@@ -9,6 +9,7 @@ whichever of the two the name holds.
 
 from __future__ import annotations
 
+import inspect
 import sys
 import types
 
@@ -23,4 +24,7 @@ def callable_as(module_name: str, function: str) -> None:
             return getattr(self, function)(*args, **kwargs)
 
     _CallableModule.__doc__ = f"This module, callable as its function {function}."
-    sys.modules[module_name].__class__ = _CallableModule
+    module = sys.modules[module_name]
+    module.__class__ = _CallableModule
+    # inspect.signature (and so a notebook's call tips) shows the function's parameters
+    module.__signature__ = inspect.signature(getattr(module, function))

@@ -353,3 +353,16 @@ def test_fk_resample_is_callable_even_after_the_module_was_imported():
     t = fk.Transform2D(0.5, 0.0, 0.1)
     assert np.array_equal(fk.resample(g, t, canvas).data, module.resample(g, t, canvas).data)
 
+
+
+def test_the_callable_modules_show_their_functions_parameters():
+    """inspect.signature (a notebook's call tip) gave (*args, **kwargs) for fk.simulate and
+    fk.resample once their modules were imported."""
+    import importlib
+    import inspect
+
+    import fusionkit as fk
+
+    for name, first in (("simulate", "world"), ("resample", "source")):
+        importlib.import_module(f"fusionkit.{name}")
+        assert list(inspect.signature(getattr(fk, name)).parameters)[0] == first
