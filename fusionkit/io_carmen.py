@@ -23,6 +23,7 @@ from ._atomic import (_journal_path, check_not_input, check_out_dir, hidden_copi
                       recover_set, write_set)
 from .carmen_read import (NO_RETURN_BAND, CarmenConfig, CarmenLog, CarmenStats,  # noqa: F401
                           flaser_geometry, read_carmen)
+from ._validate import number
 from .errors import InputError
 from .grid import OccupancyGrid
 from .mapping import MappingConfig, build_grid
@@ -192,7 +193,7 @@ def check_outputs(paths, inputs, *, overwrite: bool) -> None:
             more = f" and {len(existing) - 1} more" if len(existing) > 1 else ""
             raise InputError(f"{existing[0]}{more} already exist{'s' if not more else ''}; "
                              f"choose another output "
-                             f"directory or allow overwriting (--force)")
+                             f"directory or allow overwriting (--force; overwrite=True from Python)")
 
 
 def _robot_files(out_dir, name: str, log: ScanLog, grid: OccupancyGrid,
@@ -285,7 +286,10 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
         Unreadable or empty log, bad option values, or outputs that already exist.
     """
     if split is not None and (isinstance(split, bool) or not isinstance(split, Integral) or split < 1):
-        raise InputError(f"--split must be a whole number >= 1 of sessions, got {split!r}")
+        raise InputError(f"split (--split) must be a whole number >= 1 of sessions, got {split!r}")
+    overlap = number(overlap, "overlap")
+    resolution = number(resolution, "resolution")
+    no_return_free = number(no_return_free, "no_return_free")
     if not 0.0 <= overlap <= 0.9:
         raise InputError(f"overlap must be between 0 and 0.9, got {overlap}")
     if split is not None and split > 1 and name is not None:

@@ -262,9 +262,14 @@ def test_outputs_are_not_overwritten_without_permission(tmp_path):
     out = tmp_path / "out"
     import_carmen(p, out, name="a")
     before = (out / "a.scans.npz").read_bytes()
-    with pytest.raises(InputError, match="already exist"):
+    with pytest.raises(InputError, match=r"already exist.*\(--force; overwrite=True from Python\)"):
         import_carmen(p, out, name="a")
     assert (out / "a.scans.npz").read_bytes() == before
+    for kw, said in ((dict(overlap=None), "overlap must be a number"),
+                     (dict(resolution="x"), "resolution must be a number"),
+                     (dict(split=2.5), r"split \(--split\) must be a whole number")):
+        with pytest.raises(InputError, match=said):     # a TypeError from a comparison before
+            import_carmen(p, tmp_path / "other", **kw)
     import_carmen(p, out, name="a", overwrite=True)
     # an input is never replaced, even when overwriting is allowed
     src = out / "a.pgm"
