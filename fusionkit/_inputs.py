@@ -15,7 +15,7 @@ from pathlib import Path
 from ._atomic import _short
 from .errors import InputError
 
-__all__ = ["regular_file", "read_bytes", "read_json", "MAX_JSON_BYTES", "MAX_JSON_DEPTH"]
+__all__ = ["path_arg", "regular_file", "read_bytes", "read_json", "MAX_JSON_BYTES", "MAX_JSON_DEPTH"]
 
 #: A truth.json or a report is a few kilobytes; anything this large is not one.
 MAX_JSON_BYTES = 16 << 20
@@ -23,10 +23,22 @@ MAX_JSON_BYTES = 16 << 20
 MAX_JSON_DEPTH = 64
 
 
+def path_arg(value, what: str) -> Path:
+    """``value`` as a Path, or one :class:`InputError` when it is not a path (None, a grid, a
+    number: pathlib's TypeError said nothing of which argument)."""
+    if isinstance(value, bytes):
+        value = os.fsdecode(value)
+    if not isinstance(value, (str, os.PathLike)):
+        raise InputError(f"{what} must be a path (str or pathlib.Path), got {type(value).__name__}")
+    return Path(value)
+
+
 def regular_file(path, what: str, error=InputError) -> Path:
     """``path`` as a Path after checking it names an existing regular file (not a folder, FIFO,
     device or socket); raise ``error`` with one line naming the file otherwise."""
-    path = Path(path)
+    if not isinstance(path, (str, bytes, os.PathLike)):
+        raise error(f"the {what} must be a path (str or pathlib.Path), got {type(path).__name__}")
+    path = Path(os.fsdecode(path))
     try:
         st = os.stat(path)
     except FileNotFoundError:

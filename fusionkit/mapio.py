@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ._atomic import _digest, _short, check_not_input, show, write_set
-from ._inputs import read_bytes
+from ._inputs import path_arg, read_bytes
 from .errors import FusionkitError, InputError, MapFormatError
 from .grid import FREE, OCCUPIED, OccupancyGrid
 from .map_image import MAX_IMAGE_BYTES, _image_header, _pixels_to_cells, _read_pixels
@@ -106,7 +106,7 @@ def load_map(yaml_path) -> OccupancyGrid:
     ``p < free_thresh`` free, anything between unknown. In scale mode a pixel that is not fully
     opaque is unknown (nav2_map_server; ROS 1 map_server scaled by 99 and truncated instead).
     """
-    yaml_path = Path(yaml_path)
+    yaml_path = path_arg(yaml_path, "the map's YAML")
     meta = _read_yaml(yaml_path)
     if not os.path.lexists(meta.image):
         raise MapFormatError(
@@ -141,7 +141,7 @@ def map_info(yaml_path) -> dict:
     MapFormatError
         As :func:`load_map`, for faults found in the YAML or the image header.
     """
-    yaml_path = Path(yaml_path)
+    yaml_path = path_arg(yaml_path, "the map's YAML")
     meta = _read_yaml(yaml_path)
     if not os.path.lexists(meta.image):
         raise MapFormatError(
@@ -253,7 +253,11 @@ def save_map(grid: OccupancyGrid, yaml_path, *, image_format: str = "pgm", input
     new image is renamed into place and the new YAML comes last, so a YAML never names an
     image of another write; on any failure or interrupt both files are left as they were.
     """
-    save_maps([(grid, yaml_path)], image_format=image_format, inputs=inputs)
+    if not isinstance(grid, OccupancyGrid):
+        raise InputError(f"save_map(grid, yaml_path) writes an OccupancyGrid first, got "
+                         f"{type(grid).__name__}")
+    save_maps([(grid, path_arg(yaml_path, "the output YAML"))], image_format=image_format,
+              inputs=inputs)
 
 
 def save_maps(maps, report=None, *, image_format: str = "pgm", inputs=(), remove=()) -> None:

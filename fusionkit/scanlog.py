@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ._atomic import _short, show, write_bytes_atomic
-from ._inputs import regular_file
+from ._inputs import path_arg, regular_file
 from .errors import ScanLogError
 
 __all__ = ["ScanLog", "load_scans", "save_scans", "encode_scans", "scans_path_for"]
@@ -166,7 +166,7 @@ class ScanLog:
 
 def scans_path_for(map_yaml) -> Path:
     """``NAME.scans.npz`` beside ``NAME.yaml``."""
-    p = Path(map_yaml)
+    p = path_arg(map_yaml, "the map's YAML")
     return p.with_name(p.stem + ".scans.npz")
 
 
@@ -181,7 +181,9 @@ def encode_scans(log: ScanLog) -> bytes:
 
 def save_scans(path, log: ScanLog) -> None:
     """Write ``log`` to ``path`` (``.scans.npz``) atomically, in the CONTRACTS section 3 layout."""
-    write_bytes_atomic(path, encode_scans(log))
+    if not isinstance(log, ScanLog):
+        raise ScanLogError(f"save_scans(path, log) writes a ScanLog, got {type(log).__name__}")
+    write_bytes_atomic(path_arg(path, "the scan log's path"), encode_scans(log))
 
 
 def load_scans(path) -> ScanLog:

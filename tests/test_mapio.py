@@ -584,3 +584,23 @@ def test_random_trinary_grids_round_trip(rows, cols, seed, resolution, origin, f
     assert np.array_equal(back.data, grid.data)
     assert back.resolution == grid.resolution
     assert back.origin == grid.origin
+
+
+def test_what_is_not_a_path_or_a_grid_is_one_clear_error(tmp_path):
+    """None, a number or a grid given as a path, and save_map's arguments swapped, raised
+    pathlib's TypeError naming no argument."""
+    from fusionkit.errors import ScanLogError
+    from fusionkit.scanlog import load_scans, save_scans, scans_path_for
+    grid = _grid()
+    for call, said in ((lambda: load_map(None), "the map's YAML must be a path"),
+                       (lambda: load_map(grid), "got OccupancyGrid"),
+                       (lambda: map_info(5), "the map's YAML must be a path"),
+                       (lambda: scans_path_for(None), "the map's YAML must be a path"),
+                       (lambda: save_map(str(tmp_path / "m.yaml"), grid), "writes an OccupancyGrid first")):
+        with pytest.raises(InputError, match=said):
+            call()
+    with pytest.raises(ScanLogError, match="the scan log must be a path"):
+        load_scans(None)
+    with pytest.raises(ScanLogError, match="writes a ScanLog, got ndarray"):
+        save_scans(tmp_path / "s.scans.npz", np.zeros(3))
+    assert list(tmp_path.iterdir()) == []
