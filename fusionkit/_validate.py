@@ -9,7 +9,7 @@ import numpy as np
 from ._atomic import show
 from .errors import InputError
 
-__all__ = ["number", "whole"]
+__all__ = ["number", "whole", "random_source"]
 
 
 def number(value, name: str) -> float:
@@ -30,3 +30,13 @@ def whole(value, name: str) -> int:
             return int(value)
         raise InputError(f"{name} must be a whole number, got {show(value)}")
     return int(value)
+
+
+def random_source(seed, name: str = "seed") -> np.random.Generator:
+    """``numpy.random.default_rng(seed)`` for a seed a user may give (None, a whole number >= 0,
+    a Generator or SeedSequence), or :class:`InputError` (numpy's own error named nothing)."""
+    if isinstance(seed, (np.random.Generator, np.random.SeedSequence)) or seed is None:
+        return np.random.default_rng(seed)
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"{name} must be a whole number >= 0, a numpy Generator or None, got {show(seed)}")
+    return np.random.default_rng(int(seed))

@@ -277,6 +277,8 @@ def align_points(reference: np.ndarray, moving: np.ndarray, resolution: float, *
     callback : callable(PSOState) -> bool, optional
         Called each iteration; True stops the swarm.
     """
+    if not isinstance(config, AlignmentConfig):
+        raise InputError(f"config must be an AlignmentConfig, got {type(config).__name__}")
     resolution = _cell_size(resolution)
     reference, moving = _points(reference, "reference"), _points(moving, "moving")
     fld = make_field(reference, resolution, sigma=config.sigma)
@@ -286,6 +288,10 @@ def align_points(reference: np.ndarray, moving: np.ndarray, resolution: float, *
     r_mov = float(np.sqrt((mov ** 2).sum(axis=1)).max())
     reach = fld.radius + r_mov + resolution
     bounds = np.array([[-reach, reach], [-reach, reach], [-math.pi, math.pi]])
+    seeds = tuple(seeds)
+    if not all(isinstance(t, Transform2D) for t in seeds):
+        raise InputError("seeds must be Transform2D objects (Transform2D(x, y, theta), or "
+                         "Transform2D.from_paper(dx, dy, dphi))")
     init = None
     used = tuple(seeds[: min(config.max_seeds, config.pso.particles)]) if config.seeded else ()
     if used:

@@ -229,13 +229,23 @@ def table1(steps, truth: OccupancyGrid,
 
     Parameters
     ----------
-    steps : sequence of OccupancyGrid
-        The fused map after each map was added (``FusedMap.steps``), all in one frame.
+    steps : sequence of OccupancyGrid, or a FusedMap
+        The fused map after each map was added (``FusedMap.steps``, from ``fuse_maps(...,
+        keep_steps=True)`` or a merge result's ``fused``), all in one frame.
     truth : OccupancyGrid
         The ground-truth map.
     transform : Transform2D
         Maps the steps' frame into the truth's frame.
     """
+    from .fusion import FusedMap
+
+    if isinstance(steps, FusedMap):
+        if not steps.steps:
+            raise InputError("this fused map kept no steps: fuse with keep_steps=True for Table 1")
+        steps = steps.steps
+    if isinstance(steps, OccupancyGrid) or not all(isinstance(s, OccupancyGrid) for s in steps):
+        raise InputError("table1 takes the fused map after each step (FusedMap.steps, a list of "
+                         "OccupancyGrid); for one map, use evaluate_map")
     return [evaluate_map(s, truth, transform) for s in steps]
 
 

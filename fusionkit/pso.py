@@ -33,6 +33,7 @@ from typing import Callable
 import numpy as np
 
 from ._jit import njit
+from ._validate import random_source
 from .errors import InputError
 
 __all__ = ["PSOConfig", "PSOState", "PSOResult", "PSOSolver", "pso_minimize"]
@@ -288,7 +289,7 @@ class PSOSolver:
         self._periodic = _check_periodic(periodic, d)
         width = self._hi - self._lo
         self._vmax = np.ascontiguousarray(config.v_max * width)
-        self._rng = np.random.default_rng(seed)
+        self._rng = random_source(seed)
         p = config.particles
 
         x = self._lo + self._rng.random((p, d)) * width

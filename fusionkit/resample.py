@@ -72,6 +72,11 @@ def resample(source: OccupancyGrid, transform: Transform2D, target: OccupancyGri
         ``target``'s geometry, each cell the value of the source cell under its centre
         (nearest neighbour), unknown (-1) where no source cell lies.
     """
+    if not (isinstance(source, OccupancyGrid) and isinstance(target, OccupancyGrid)
+            and isinstance(transform, Transform2D)):
+        raise InputError(f"resample(source, transform, target) takes two OccupancyGrid maps and a "
+                         f"Transform2D, got {type(source).__name__}, {type(transform).__name__}, "
+                         f"{type(target).__name__}")
     a, b = _cell_affine(source, transform, target)
     out = _resample_kernel(source.data, a[0, 0], a[0, 1], a[1, 0], a[1, 1], b[0], b[1],
                            target.rows, target.cols, np.int8(UNKNOWN))

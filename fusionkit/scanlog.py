@@ -149,13 +149,20 @@ class ScanLog:
 
     def subset(self, index) -> "ScanLog":
         """The scans at ``index`` (slice, mask or integer array)."""
-        return ScanLog(self.poses[index], self.ranges[index], self.angle_min,
-                       self.angle_increment, self.range_max)
+        poses, ranges = self._at(index)
+        return ScanLog(poses, ranges, self.angle_min, self.angle_increment, self.range_max)
+
+    def _at(self, index):
+        """Poses and ranges at ``index``, or :class:`ScanLogError` for an index out of range."""
+        try:
+            return self.poses[index], self.ranges[index]
+        except IndexError as exc:
+            raise ScanLogError(f"{exc} (a log of {self.n_scans} scans): give scan indices in "
+                               f"0..{self.n_scans - 1}, a slice or a mask of {self.n_scans}") from None
 
     def endpoints(self, index=None) -> np.ndarray:
         """Map-frame points (m) of the beams that returned, shape ``(K, 2)``."""
-        poses = self.poses if index is None else self.poses[index]
-        ranges = self.ranges if index is None else self.ranges[index]
+        poses, ranges = (self.poses, self.ranges) if index is None else self._at(index)
         ang = poses[:, 2:3] + self.beam_angles[None, :]
         hit = np.isfinite(ranges) & (ranges <= self.range_max)
         r = np.where(hit, ranges, 0.0)

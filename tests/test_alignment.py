@@ -147,3 +147,16 @@ def test_alignment_settings_of_the_wrong_kind_are_refused():
         with pytest.raises(InputError, match=said):
             AlignmentConfig(**kw)
     assert AlignmentConfig(seeded=np.bool_(False)).seeded is False
+
+
+def test_seeds_and_config_of_the_wrong_kind_are_one_clear_error():
+    """A tuple as a seed raised "'tuple' object has no attribute 'to_paper'"; a PSOConfig as
+    config raised AttributeError 'sigma'."""
+    import pytest
+
+    from fusionkit.errors import InputError
+    pts = _room_points()
+    with pytest.raises(InputError, match="seeds must be Transform2D objects"):
+        align_points(pts, pts, 0.1, seeds=[(0.0, 0.0, 0.0)], seed=0)
+    with pytest.raises(InputError, match="config must be an AlignmentConfig, got PSOConfig"):
+        align_points(pts, pts, 0.1, config=PSOConfig(), seed=0)

@@ -308,3 +308,17 @@ def test_a_matrix_that_is_not_a_rigid_motion_is_refused():
         Transform2D.from_paper(None, 2.0, 0.0)
     with pytest.raises(InputError, match="compares with a Transform2D"):
         t.error_to((0.0, 0.0, 0.0))
+
+
+def test_scan_indices_out_of_range_and_resample_arguments_of_the_wrong_kind():
+    """log.subset([10000]) and endpoints([99999]) raised IndexError; resample with a tuple as
+    the transform raised AttributeError."""
+    log = ScanLog(np.zeros((12, 3)), np.full((12, 8), 2.0, np.float32), -math.pi, 2 * math.pi / 8, 8.0)
+    for call in (lambda: log.subset([10000]), lambda: log.subset(np.ones(3, bool)),
+                 lambda: log.endpoints([99999])):
+        with pytest.raises(ScanLogError, match=r"a log of 12 scans\): give scan indices in 0..11"):
+            call()
+    g = OccupancyGrid(np.zeros((4, 4), np.int8), 0.1)
+    with pytest.raises(InputError, match="takes two OccupancyGrid maps and a Transform2D, got "
+                                         "OccupancyGrid, tuple, OccupancyGrid"):
+        resample(g, (0.0, 0.0, 0.0), g)

@@ -165,3 +165,18 @@ def test_format_table1_side_by_side():
     assert any(line.startswith("M1,2,3,4,5") and "96.91" in line for line in lines)
     plain = format_table1(rows, paper=False)
     assert "79.55" not in plain and len(plain.splitlines()) == 3 + 2
+
+
+def test_table1_takes_a_fused_map_and_refuses_a_single_grid():
+    """table1(fused_map, truth) raised "'FusedMap' object is not iterable"."""
+    from fusionkit.errors import InputError
+    from fusionkit.fusion import fuse_maps
+    from fusionkit.transform import Transform2D
+    from fusionkit.worlds import default_world
+    world = default_world()
+    fused = fuse_maps([world, world], [Transform2D(), Transform2D()], keep_steps=True)
+    assert [r.completeness for r in table1(fused, world)] == [r.completeness for r in table1(fused.steps, world)]
+    with pytest.raises(InputError, match="for one map, use evaluate_map"):
+        table1(fused.grid, world)
+    with pytest.raises(InputError, match="keep_steps=True"):
+        table1(fuse_maps([world], [Transform2D()]), world)

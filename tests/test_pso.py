@@ -259,3 +259,14 @@ def test_objective_receives_contiguous_float64_copy():
                        record_positions=True)
     assert set(seen) == {(np.dtype(np.float64), True, (5, 3))}
     assert (np.abs(res.positions_history) <= 1).all()
+
+
+def test_a_seed_that_is_not_a_whole_number_is_one_clear_error():
+    """'1', 1.5 and -1 raised numpy's TypeError or ValueError, naming no argument."""
+    from fusionkit.errors import InputError
+    for bad in ("1", 1.5, -1, True):
+        with pytest.raises(InputError, match="seed must be a whole number >= 0, a numpy Generator or None"):
+            pso_minimize(lambda X: (X ** 2).sum(axis=1), [(-1, 1)] * 2, seed=bad)
+    a = pso_minimize(lambda X: (X ** 2).sum(axis=1), [(-1, 1)] * 2, seed=np.int64(4))
+    b = pso_minimize(lambda X: (X ** 2).sum(axis=1), [(-1, 1)] * 2, seed=4)
+    assert np.array_equal(a.x, b.x)
