@@ -27,6 +27,7 @@ import contextlib
 import hashlib
 import json
 import os
+import re
 import secrets
 import shutil
 from pathlib import Path
@@ -38,7 +39,8 @@ from ._guards import (_check_target, _parent, _short, _write_error, check_distin
                       make_out_dir, made_out_dir, show)
 from .errors import InputError
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set", "recover_set", "hidden_copies",
+__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set", "recover_set", "recover_folder",
+           "hidden_copies",
            "check_not_input", "check_distinct", "check_writable", "check_out_dir", "make_out_dir", "made_out_dir",
            "describe_os_error", "show"]
 
@@ -76,8 +78,9 @@ def _write_durable(path: Path, payload: bytes) -> None:
 
 
 @contextlib.contextmanager
-def _locked(directories: Iterable[Path]) -> Iterator[None]:
-    """Exclusive ``flock`` on each directory (sorted, so that two writers cannot deadlock)."""
+def _locked(directories: Iterable[Path], wait: bool = True) -> Iterator[None]:
+    """Exclusive ``flock`` on each directory (sorted, so that two writers cannot deadlock);
+    without ``wait``, :class:`BlockingIOError` when another process holds one."""
     try:
         import fcntl
     except ImportError:  # no flock on this platform: writes are still atomic one by one
@@ -88,7 +91,7 @@ def _locked(directories: Iterable[Path]) -> Iterator[None]:
         for d in sorted({os.path.realpath(d) for d in directories}):
             fd = os.open(d, os.O_RDONLY)
             fds.append(fd)
-            fcntl.flock(fd, fcntl.LOCK_EX)
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
         yield
     finally:
         for fd in reversed(fds):
@@ -135,6 +138,54 @@ def recover_set(commit: os.PathLike | str, leftovers, targets: Iterable[os.PathL
                 if leftovers.fullmatch(entry) and not os.path.isdir(folder / entry):
                     with contextlib.suppress(OSError):
                         os.unlink(folder / entry)
+
+
+#: A temporary file of a write (``.NAME.TOKEN.tmp``, ``.NAME.TOKEN.journal.tmp``)
+_STAGED = re.compile(r"\..+\.[0-9a-f]{12}(?:\.journal)?\.tmp")
+
+
+def _here(jpath: Path, folder: str) -> bool:
+    """Whether every file a journal names is in ``folder`` (a journal cut short is: it names
+    none, and :func:`_recover` drops it)."""
+    try:
+        doc = json.loads(jpath.read_text(encoding="utf-8"))
+        return all(os.path.realpath(_parent(Path(e["target"]))) == folder for e in doc["entries"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return True
+
+
+def _recover_folder(folder: Path) -> None:
+    """With ``folder`` locked: finish or undo every write of a set of files all in ``folder``
+    that a kill cut short (whatever its names), then remove the temporary files killed writes
+    left there (no write holds the folder, so none is needed). A set with files in other
+    folders too is left, its backups with it, to the next write of that set, which names them."""
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return
+    real = os.path.realpath(folder)
+    for name in names:
+        if (name.startswith(".") and name.endswith(_JOURNAL) and len(name) > len(_JOURNAL) + 1
+                and _here(folder / name, real)):
+            _recover(folder / name[1:-len(_JOURNAL)])
+    for name in os.listdir(folder):
+        if _STAGED.fullmatch(name) and not os.path.isdir(folder / name):
+            with contextlib.suppress(OSError):
+                os.unlink(folder / name)
+
+
+def recover_folder(folder: os.PathLike | str, *, wait: bool = True) -> bool:
+    """Finish or undo the writes a kill cut short in ``folder`` and remove their temporary
+    files (what every write does first in its folders). Without ``wait``, nothing is done while
+    another write holds the folder (a reader must not wait on, or deadlock with, a writer).
+    True when the folder was looked at."""
+    folder = Path(folder)
+    try:
+        with _locked([folder], wait=wait):
+            _recover_folder(folder)
+        return True
+    except OSError:   # busy, read-only, missing: the reader reads what is there
+        return False
 
 
 def hidden_copies(names: str):
@@ -252,6 +303,8 @@ def write_set(files: Sequence[tuple[os.PathLike | str, bytes | None]],
         with _locked(_parent(p) for p in targets):
             _recover(commit_path, targets)
             _sweep(targets)
+            for folder in dict.fromkeys(_parent(p) for p in targets):
+                _recover_folder(folder)   # other sets a kill cut short there, whatever their names
             try:
                 for p, payload in items + [(commit_path, commit_payload)]:
                     if payload is None:
@@ -400,6 +453,7 @@ def atomic_path(target: str | os.PathLike) -> Iterator[Path]:
         with _locked([_parent(target)]):
             _recover(target)
             _sweep([target])
+            _recover_folder(_parent(target))
             try:
                 yield tmp
                 with open(tmp, "rb+") as fh:

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._atomic import _digest, _short, check_not_input, show, write_set
+from ._atomic import _digest, _parent, _short, check_not_input, recover_folder, show, write_set
 from ._inputs import path_arg, read_bytes
 from .errors import FusionkitError, InputError, MapFormatError
 from .grid import FREE, OCCUPIED, OccupancyGrid
@@ -107,6 +107,9 @@ def load_map(yaml_path) -> OccupancyGrid:
     opaque is unknown (nav2_map_server; ROS 1 map_server scaled by 99 and truncated instead).
     """
     yaml_path = path_arg(yaml_path, "the map's YAML")
+    # a write of fusionkit's that a kill cut short there is finished or undone first (unless
+    # a write holds the folder now), so that the YAML and its image are of one write
+    recover_folder(_parent(yaml_path), wait=False)
     meta = _read_yaml(yaml_path)
     if not os.path.lexists(meta.image):
         raise MapFormatError(

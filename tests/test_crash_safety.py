@@ -244,6 +244,50 @@ def test_a_process_killed_at_any_rename_leaves_one_whole_set(tmp_path, how):
                 assert _state(out) == "new"
 
 
+def test_a_killed_write_is_finished_or_undone_by_any_later_write_or_read_in_its_folder(tmp_path):
+    """A ``kill -9`` mid-commit left its journal, backups and temporary files, and the folder
+    short of the set's YAML and report, until a write of that same output: an export of
+    another name into the folder, or a merge (or the TUI) reading its maps, left them so."""
+    n = _count_replaces(tmp_path)
+    for k in range(1, n + 1):
+        out = tmp_path / f"k{k}"
+        out.mkdir()
+        _write(out, OLD, "old")
+        save_map(_grid(9), out / "other.yaml")
+        proc = _child(out, k, "SIGKILL")
+        try:
+            proc.communicate(timeout=120)
+        finally:
+            proc.kill()
+        assert proc.returncode == -signal.SIGKILL
+        if k % 2:
+            save_map(_grid(5), out / "another.yaml")   # a write of another name
+        else:
+            assert _same(load_map(out / "other.yaml"), _grid(9))   # a read of another map
+        assert _state(out) in ("old", "new"), f"killed at rename {k}"
+
+
+def test_the_tuis_overwrite_question_lists_the_files_a_killed_write_had_hidden(tmp_path):
+    """After a ``kill -9`` mid-commit, the TUI asked to replace only merged.pgm: the YAML and
+    the report, hidden as backups, came back (and were replaced) only after the answer."""
+    import sys
+    sys.path.insert(0, str(ROOT / "tui"))
+    from fusionkit_tui.runner import export_paths
+    names = ["merged.yaml", "merged.pgm", "merged.report.json", "merged.group1.yaml", "merged.group1.pgm"]
+    for k in range(1, _count_replaces(tmp_path)):   # killed before the commit point
+        out = tmp_path / f"k{k}"
+        out.mkdir()
+        _write(out, OLD, "old")
+        proc = _child(out, k, "SIGKILL")
+        try:
+            proc.communicate(timeout=120)
+        finally:
+            proc.kill()
+        listed = export_paths(out / "merged.yaml", groups=1).existing()
+        assert sorted(p.name for p in listed) == sorted(names), f"killed at rename {k}"
+        assert _state(out) == "old"
+
+
 def test_two_writers_on_one_output_end_with_one_whole_set(tmp_path):
     out = tmp_path / "o"
     out.mkdir()

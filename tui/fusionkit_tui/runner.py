@@ -277,7 +277,13 @@ class ExportPaths:
                 *(f for g in self.groups for f in (g, g.with_suffix(".pgm"))))
 
     def existing(self) -> list[Path]:
-        """Those of the files that already exist (an export would overwrite them)."""
+        """Those of the files that already exist (an export would overwrite them), once a
+        write a kill cut short in their folder is finished or undone (its files hidden, the
+        list would be short of them)."""
+        from fusionkit._atomic import recover_folder
+
+        for folder in dict.fromkeys(p.parent for p in self.all):
+            recover_folder(folder, wait=False)
         return [p for p in self.all if p.exists()]
 
 

@@ -9,6 +9,8 @@ from textual.binding import Binding
 from textual.message import Message
 from textual.widgets import DataTable, DirectoryTree
 
+from fusionkit._atomic import recover_folder
+
 from ..runner import is_map_file
 
 __all__ = ["MapTree", "SelectedMaps"]
@@ -51,6 +53,11 @@ class MapTree(DirectoryTree):
         self.unreadable: dict[Path, str] = {}
 
     def filter_paths(self, paths: Iterable[Path]) -> Iterable[Path]:
+        paths = list(paths)
+        if paths and recover_folder(paths[0].parent, wait=False):
+            # a write a kill cut short there was finished or undone: list what is there now
+            paths = [p for p in paths if p.exists()] + [
+                p for p in sorted(paths[0].parent.iterdir()) if p not in paths]
         return [p for p in paths
                 if not p.name.startswith(".") and (self._safe_is_dir(p) or is_map_file(p))]
 
