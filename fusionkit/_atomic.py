@@ -246,7 +246,7 @@ def _recover(commit: Path, targets: Iterable[Path] = ()) -> None:
         if committed:
             if backup is not None:
                 backup.unlink(missing_ok=True)
-        elif backup is not None and backup.exists():
+        elif backup is not None and os.path.lexists(backup):
             _restore(backup, target)
         elif not existed:
             target.unlink(missing_ok=True)
@@ -366,7 +366,7 @@ def _commit(items, commit_path: Path, commit_payload: bytes, staged, hide, token
             if existed and (i == last or os.path.realpath(p) in hide or staged[i] is None):
                 os.replace(p, backup)
         for p, backup, existed in entries:  # every other old file keeps a backup
-            if existed and not backup.exists():
+            if existed and not os.path.lexists(backup):
                 _backup_copy(p, backup)
         for d in dirs:
             _fsync_dir(d)
@@ -409,15 +409,21 @@ class _Cancelled(Exception):
 
 def _backup_copy(target: Path, backup: Path) -> None:
     try:
-        os.link(target, backup)
+        os.link(target, backup, follow_symlinks=False)   # a symbolic link is kept as itself
     except OSError:
-        shutil.copy2(target, backup)
+        shutil.copy2(target, backup, follow_symlinks=False)
+
+
+def _same_entry(a: Path, b: Path) -> bool:
+    """Whether two names are links to one file (a symbolic link, even dangling, as itself)."""
+    sa, sb = os.lstat(a), os.lstat(b)
+    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
 
 
 def _restore(backup: Path, target: Path) -> None:
     """Put ``backup`` back as ``target`` (a hard-link backup of an untouched target is simply
     dropped: renaming a link onto the same file does nothing)."""
-    if os.path.lexists(target) and os.path.samefile(backup, target):
+    if os.path.lexists(target) and _same_entry(backup, target):
         backup.unlink()
     else:
         os.replace(backup, target)
@@ -429,7 +435,7 @@ def _rollback(entries) -> bool:
     ok = True
     for p, backup, existed in reversed(entries):
         try:
-            if backup is not None and backup.exists():
+            if backup is not None and os.path.lexists(backup):
                 _restore(backup, p)
             elif not existed:
                 p.unlink(missing_ok=True)

@@ -124,6 +124,33 @@ def test_a_write_failing_at_any_rename_leaves_the_old_set_whole(tmp_path, monkey
         assert _state(out) == "new"
 
 
+def test_an_output_that_is_a_dangling_symbolic_link_is_replaced_or_left_as_it_was(tmp_path, monkeypatch):
+    """The link was hidden as a backup, then its backup copy (which followed the link) failed:
+    the write ended "cannot be written (No such file or directory)" and the rollback, asking
+    whether the dangling backup existed, never put the link back."""
+    real = os.replace
+    for k in range(1, 4):
+        out = tmp_path / f"at{k}"
+        out.mkdir()
+        (out / "merged.yaml").symlink_to(out / "nowhere" / "x")
+        calls = []
+
+        def failing(src, dst):
+            calls.append(dst)
+            if len(calls) == k:
+                raise OSError(28, "No space left on device")
+            return real(src, dst)
+
+        monkeypatch.setattr(_atomic.os, "replace", failing)
+        with pytest.raises(InputError):
+            _write(out, NEW, "new")
+        monkeypatch.setattr(_atomic.os, "replace", real)
+        assert sorted(p.name for p in out.iterdir()) == ["merged.yaml"], f"rename {k}"
+        assert os.readlink(out / "merged.yaml") == str(out / "nowhere" / "x")
+        _write(out, NEW, "new")       # the link is replaced by the map
+        assert not (out / "merged.yaml").is_symlink() and _state(out) == "new"
+
+
 def test_a_signal_during_the_commit_rolls_back_then_interrupts(tmp_path, monkeypatch):
     """With the command-line handlers, SIGTERM arriving mid-commit is held until the old set
     is put back, then ends the command."""
