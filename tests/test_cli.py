@@ -331,3 +331,17 @@ def test_a_map_the_papers_method_leaves_out_has_confidence_0_with_its_agreement_
     assert left and all(m["confidence"] == 0.0 for m in left), left
     assert all(re.search(r"best alignment agrees on \d+% of \d+ overlapping wall cells", m["reason"])
                for m in left), left
+
+
+def test_a_loop_of_symbolic_links_is_one_line_and_exit_2(tmp_path, capsys):
+    """pathlib's "RuntimeError: Symlink loop" came out as a 32-line traceback, exit 1."""
+    (tmp_path / "a.yaml").symlink_to(tmp_path / "b.yaml")
+    (tmp_path / "b.yaml").symlink_to(tmp_path / "a.yaml")
+    (tmp_path / "x").symlink_to(tmp_path / "y")
+    (tmp_path / "y").symlink_to(tmp_path / "x")
+    for argv in (["merge", str(tmp_path / "a.yaml"), str(tmp_path / "b.yaml"), "-o", str(tmp_path / "m.yaml")],
+                 ["simulate", "--out", str(tmp_path / "x"), "--robots", "2", "--poses", "100"]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "a loop of symbolic links; check the path" in err, err
+        assert re.search(rf"error: {re.escape(str(tmp_path))}/(a\.yaml|x)", err), err

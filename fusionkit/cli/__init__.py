@@ -206,6 +206,15 @@ def _main(argv) -> int:
     except RecursionError:
         _say(f"{command}: error: an input is nested too deeply to read; check the files given")
         return 2
+    except RuntimeError as exc:
+        loop = re.fullmatch(r"Symlink loop from '?(.+?)'?", str(exc))   # pathlib's resolve()
+        if loop is not None:
+            _say(f"{command}: error: {loop.group(1)}: a loop of symbolic links; check the path")
+            return 2
+        lost = _signals.swallowed()
+        if lost is None:
+            raise
+        return _interrupted(command, argv, lost)
     except Exception:
         # an interrupt a library turned into its own error while it loaded (numba's "Error
         # calling __set_name__", an ImportError) is the interrupt
