@@ -345,3 +345,13 @@ def test_a_loop_of_symbolic_links_is_one_line_and_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "a loop of symbolic links; check the path" in err, err
         assert re.search(rf"error: {re.escape(str(tmp_path))}/(a\.yaml|x)", err), err
+
+
+def test_a_world_seed_given_with_a_world_map_is_refused(tmp_path, capsys):
+    """--world-seed beside --world was ignored without a word (--world-size was refused)."""
+    from pathlib import Path
+    world = Path(__file__).resolve().parents[1] / "maps" / "office.yaml"
+    assert main(["simulate", "--world", str(world), "--world-seed", "3", "--out", str(tmp_path / "r")]) == 2
+    assert capsys.readouterr().err == ("fusionkit simulate: error: --world-seed applies to generated worlds "
+                                       "only; leave it out with --world\n")
+    assert not (tmp_path / "r").exists()

@@ -32,8 +32,8 @@ def register(sub) -> None:
                         "free and unknown cells let them pass, robots drive in free cells)")
     w.add_argument("--world-kind", choices=list(WORLDS), default=None,
                    help="generate a world of this kind instead of loading one (default: office)")
-    p.add_argument("--world-seed", type=int_range(0, 2**31 - 1), default=0, metavar="N",
-                   help="layout seed of a generated world (default: %(default)s)")
+    p.add_argument("--world-seed", type=int_range(0, 2**31 - 1), default=None, metavar="N",
+                   help="layout seed of a generated world (default: 0)")
     p.add_argument("--world-size", type=float_range(10.0, 2000.0), nargs=2, metavar=("W", "H"),
                    default=None, help="width and height (m) of a generated world (default: 40 30)")
     p.add_argument("--resolution", type=float_range(0.01, 0.5), default=None, metavar="M",
@@ -93,19 +93,20 @@ def run(args) -> int:
                                                                         args.clearance),
                           drift_xy=args.drift_xy, drift_theta=args.drift_theta)
     if args.world is not None:
-        if args.world_size is not None:
-            raise InputError("--world-size applies to generated worlds only; leave it out with --world")
+        for flag, value in (("--world-size", args.world_size), ("--world-seed", args.world_seed)):
+            if value is not None:   # --world-seed was ignored without a word
+                raise InputError(f"{flag} applies to generated worlds only; leave it out with --world")
         world = load_map(args.world)
         source = args.world
     elif args.world_kind is None and args.world_size is None and args.resolution is None \
-            and args.world_seed == 0:
+            and not args.world_seed:
         world = default_world()
         source = "office (built in, layout seed 0)"
     else:
-        kind = args.world_kind or "office"
-        world = make_world(kind, args.world_seed, args.world_size or DEFAULT_SIZE,
+        kind, layout = args.world_kind or "office", args.world_seed or 0
+        world = make_world(kind, layout, args.world_size or DEFAULT_SIZE,
                            args.resolution or DEFAULT_RESOLUTION)
-        source = f"{kind} (generated, layout seed {args.world_seed})"
+        source = f"{kind} (generated, layout seed {layout})"
     mapping = MappingConfig(resolution=args.resolution or world.resolution)
     config = SimulationConfig(robots=args.robots, poses=args.poses, lidar=lidar, motion=motion,
                               mapping=mapping, seed=args.seed)
