@@ -355,3 +355,12 @@ def test_a_world_seed_given_with_a_world_map_is_refused(tmp_path, capsys):
     assert capsys.readouterr().err == ("fusionkit simulate: error: --world-seed applies to generated worlds "
                                        "only; leave it out with --world\n")
     assert not (tmp_path / "r").exists()
+
+
+def test_bench_with_no_folder_says_only_the_error_of_a_bad_option(tmp_path, monkeypatch, capsys):
+    """The line on the folders found came first, so the error was the second of two lines."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["bench", "--cases", "2", "--jobs", "2", "--workers", "3", "--out", "bq"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == ("fusionkit bench: error: --jobs and --workers "
+                                                   "disagree; give one of them\n")

@@ -145,15 +145,16 @@ def run(args) -> int:
     inputs = _inputs(folders if use_maps else [], logs)
     check_not_input(output_files(out, config.methods), inputs)
     progress = ProgressBar("bench", unit="cases", enabled=False if args.quiet else None)
-    if defaulted and use_maps and not args.quiet:
-        # the default folders are relative to where the command runs: say what was found
-        print("no folder given: the maps of " + " and ".join(f"./{f}" for f in folders)
-              + (", and the built-in worlds" if builtin else "") if folders else
-              "no folder given, and no ./maps or ./maps/real here: the built-in worlds only "
-              "(give folders of maps to bench on them)", flush=True)
     command = "fusionkit bench " + " ".join(shlex.quote(a) for a in sys.argv[2:]) \
         if len(sys.argv) > 1 and sys.argv[1] == "bench" else ""
     with executor_from_args(args, jobs=args.jobs) as executor:
+        if defaulted and use_maps and not args.quiet:
+            # the default folders are relative to where the command runs: say what was found
+            # (once the options are known good: an error is then the only line)
+            print("no folder given: the maps of " + " and ".join(f"./{f}" for f in folders)
+                  + (", and the built-in worlds" if builtin else "") if folders else
+                  "no folder given, and no ./maps or ./maps/real here: the built-in worlds only "
+                  "(give folders of maps to bench on them)", flush=True)
         if not args.quiet and executor.name != "inprocess":
             progress.note(executor.describe())
         result = run_bench(worlds, config, skipped=skipped, command=command, executor=executor,
