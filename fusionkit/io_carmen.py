@@ -91,6 +91,9 @@ class CarmenImport:
         ``truth.json`` (written only with a split).
     files : tuple[Path, ...]
         Every file written.
+    removed : tuple[Path, ...]
+        Files of an earlier run in the folder that ``overwrite`` removed with the same write:
+        its sessions the new split does not have, and the merges of its maps.
     """
 
     stats: CarmenStats
@@ -99,6 +102,7 @@ class CarmenImport:
     world: ImportedMap | None
     truth: Path | None
     files: tuple[Path, ...] = field(default=())
+    removed: tuple[Path, ...] = field(default=())
 
 
 # -- frames and sessions --------------------------------------------------------------------------
@@ -368,4 +372,4 @@ def import_carmen(path, out_dir, *, name: str | None = None, split: int | None =
     if progress:
         progress(total, total, "world")
     files = tuple(p for r in robots for p in r.files) + world.files + (truth_path,)
-    return CarmenImport(carmen.stats, log.range_max, robots, world, truth_path, files)
+    return CarmenImport(carmen.stats, log.range_max, robots, world, truth_path, files, tuple(stale))

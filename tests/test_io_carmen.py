@@ -295,6 +295,21 @@ def test_cli_imports_and_reports(tmp_path, capsys):
         "robot_1.yaml", "robot_2.scans.npz", "world.yaml", "world.pgm", "truth.json"}
 
 
+def test_a_split_over_an_earlier_run_says_which_of_its_files_it_removed(tmp_path, capsys):
+    """--force removed the earlier run's robot_3 and its merge without a word (simulate says so)."""
+    p = write(tmp_path, [flaser([2.0] * 180, (i * 0.1, 0, 0), i) for i in range(6)])
+    out = tmp_path / "o"
+    assert _main(["import", "carmen", str(p), "--out", str(out), "--split", "3"]) == 0
+    assert _main(["merge", str(out / "robot_1.yaml"), str(out / "robot_2.yaml"), str(out / "robot_3.yaml"),
+                  "-o", str(out / "merged.yaml"), "--quiet"]) in (0, 3)
+    capsys.readouterr()
+    assert _main(["import", "carmen", str(p), "--out", str(out), "--split", "2", "--force"]) == 0
+    said = capsys.readouterr().out.splitlines()[-1]
+    assert said.startswith("removed the earlier run's files: ")
+    for name in ("robot_3.yaml", "robot_3.pgm", "robot_3.scans.npz", "merged.report.json", "merged.yaml"):
+        assert name in said and not (out / name).exists()
+
+
 @pytest.mark.parametrize("case", ["missing", "empty", "name_with_split", "exists", "overlap"])
 def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, case):
     good = write(tmp_path, [flaser([2.0] * 8, (i * 0.1, 0, 0), i) for i in range(4)], "good.log")

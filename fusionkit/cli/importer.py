@@ -154,6 +154,8 @@ def run_carmen(args) -> int:
         print(f"  world: map {w.shape[1]} x {w.shape[0]} cells, {w.occupied} occupied; "
               f"truth in {res.truth}")
     print(f"wrote {len(res.files)} files to {args.out} in {time.perf_counter() - t0:.1f} s")
+    if res.removed:   # said as simulate says it
+        print(f"removed the earlier run's files: {', '.join(p.name for p in res.removed)}")
     return 0
 
 
