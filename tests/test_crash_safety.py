@@ -869,3 +869,23 @@ def test_the_kinds_an_interrupt_names_are_those_the_commands_register():
         sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
         inner = next(a for a in sub.choices[command]._actions if isinstance(a, argparse._SubParsersAction))
         assert tuple(inner.choices) == kinds, command
+
+
+def test_a_ctrl_c_while_the_programs_modules_load_is_one_line_and_exit_130():
+    """Between the program's start and its command's handler, a Ctrl-C came out of an import
+    as a traceback. A Python session that imports the command line keeps its own Ctrl-C."""
+    code = textwrap.dedent("""
+        import os, signal, sys, time
+        sys.argv = [{argv0!r}, "merge", "a.yaml", "b.yaml", "-o", "m.yaml"]
+        import fusionkit.cli
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(5)
+    """)
+    env = {**os.environ, "NUMBA_THREADING_LAYER": "threadsafe"}
+    done = subprocess.run([sys.executable, "-c", code.format(argv0="/venv/bin/fusionkit")], env=env,
+                          capture_output=True, timeout=60, cwd=ROOT)
+    assert done.returncode == 130
+    assert done.stderr == b"fusionkit merge: interrupted; no output was left half-written\n"
+    done = subprocess.run([sys.executable, "-c", code.format(argv0="-c")], env=env,
+                          capture_output=True, timeout=60, cwd=ROOT)
+    assert b"KeyboardInterrupt" in done.stderr
