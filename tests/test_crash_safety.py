@@ -876,6 +876,7 @@ def test_a_ctrl_c_while_the_programs_modules_load_is_one_line_and_exit_130():
     as a traceback. A Python session that imports the command line keeps its own Ctrl-C."""
     code = textwrap.dedent("""
         import os, signal, sys, time
+        signal.signal(signal.SIGINT, signal.default_int_handler)   # as started from a shell
         sys.argv = [{argv0!r}, "merge", "a.yaml", "b.yaml", "-o", "m.yaml"]
         import fusionkit.cli
         os.kill(os.getpid(), signal.SIGINT)
