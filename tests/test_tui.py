@@ -1236,3 +1236,46 @@ async def test_the_result_is_said_earlier_by_the_readable_maps_chosen_now_and_wh
             assert "changed since this merge started" in str(screen.result_panel.query_one("#why").render())
     finally:
         (other / "broken.yaml").unlink()
+
+
+async def test_an_unreadable_maps_whole_reason_is_shown_and_a_folder_says_how_many_are_unreadable(in_root):
+    """The reason was cut at two lines, mid-sentence, with what to fix lost; adding a folder
+    said "added 3 maps" when one of them could not be read."""
+    from fusionkit_tui.widgets.map_preview import MapPreview
+    bad = Path("bad")
+    bad.mkdir()
+    for name in ("robot_1", "robot_2"):
+        for suffix in (".yaml", ".pgm"):
+            (bad / f"{name}{suffix}").write_bytes((Path("run") / f"{name}{suffix}").read_bytes())
+    (bad / "empty.yaml").write_text("")
+    app = make_app(["run/robot_1.yaml", "run/robot_2.yaml"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        maps = app.main.maps
+        assert maps.add_directory(in_root / "bad") == 3
+        await pilot.pause()
+        said = [n.message for n in app._notifications]
+        assert any(m.endswith("from " + str(in_root / "bad") + " (1 unreadable, left out of a merge)")
+                   for m in said), said
+        path, why = next((p, w) for p, w in maps.unreadable.items() if p.name == "empty.yaml")
+        maps._preview(path)
+        await pilot.pause()
+        preview = maps.query_one("#preview", MapPreview)
+        shown = " ".join(" ".join(preview.render_line(y).text.split()) for y in range(preview.size.height))
+        assert "".join(why.split()) in "".join(shown.split()), (why, shown)   # wrapped, whole
+
+
+async def test_an_export_path_through_a_file_says_it_is_a_file(in_root):
+    """It said the directory "does not exist; create it", which cannot be done."""
+    app = make_app(["run/robot_1.yaml", "run/robot_2.yaml"])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        await run_merge(pilot)
+        await pilot.press("e")
+        await pilot.pause()
+        app.screen.query_one(Input).value = "run/robot_1.pgm/x.yaml"
+        await pilot.press("enter")
+        await pilot.pause()
+        assert isinstance(app.screen, ExportScreen)
+        said = str(app.screen.query_one("#export-error").render())
+        assert "run/robot_1.pgm is a file, not a folder" in said, said

@@ -121,7 +121,10 @@ class ExportScreen(ModalScreen[str | None]):
         files.update(f"writes {', '.join(names[:-1])} and {names[-1]} in {where}; enter saves, "
                      f"escape cancels")
         if not where.is_dir():
-            error.update(f"the directory {where} does not exist; create it or choose another")
+            # a path through a file ("robot_1.pgm/x.yaml") names no folder that can be made
+            through = next((q for q in [where, *where.parents] if q.exists() and not q.is_dir()), None)
+            error.update(f"{through} is a file, not a folder; choose another path" if through else
+                         f"the directory {where} does not exist; create it or choose another")
             return False
         if not os.access(where, os.W_OK | os.X_OK):
             error.update(f"the directory {where} is not writable; choose another")

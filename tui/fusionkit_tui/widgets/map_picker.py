@@ -237,7 +237,8 @@ class MapsPane(Vertical):
             self.notify(str(exc), severity="error")
             return 0
         before = len(self._entries)
-        self._report(self._add(maps))
+        errors = self._add(maps)
+        self._report(errors)
         added = len(self._entries) - before
         if not maps:
             self.notify(f"no map YAML files in {directory}", severity="warning")
@@ -245,7 +246,8 @@ class MapsPane(Vertical):
             self.notify(f"the {len(maps)} map{'s' if len(maps) != 1 else ''} of {directory} "
                         f"{'are' if len(maps) != 1 else 'is'} selected already")
         else:
-            self.notify(f"added {added} map{'s' if added != 1 else ''} from {directory}")
+            bad = f" ({len(errors)} unreadable, left out of a merge)" if errors else ""
+            self.notify(f"added {added} map{'s' if added != 1 else ''} from {directory}{bad}")
         return added
 
     def clear_selection(self) -> None:
@@ -369,5 +371,6 @@ class MapsPane(Vertical):
 
     def _show_error(self, path: Path, message: str) -> None:
         if self._previewing is not None and self._previewing.resolve() == path.resolve():
-            self.query_one("#info", Static).update(Text(f"unreadable: {message}", style="bold red"))
-            self.query_one(MapPreview).clear("cannot read this map: it is left out of a merge")
+            self.query_one("#info", Static).update(Text(f"unreadable: {path.name}; it is left out "
+                                                        f"of a merge", style="bold red"))
+            self.query_one(MapPreview).clear(message)   # the whole reason, wrapped: room enough

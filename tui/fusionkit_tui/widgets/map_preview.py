@@ -11,6 +11,8 @@ Without colour (``NO_COLOR`` set) the states are drawn with distinct characters 
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 from rich.color import Color
 from rich.segment import Segment
@@ -243,10 +245,14 @@ class MapPreview(Widget):
             return self._cache[1]
         base = self.rich_style
         if self._grid is None:
+            # the message wrapped whole (a reason cut at the width lost what to do), centred
+            lines = (textwrap.wrap(self._message, max(w - 2, 1), break_on_hyphens=False)
+                     if self._message else [])
+            top = max((h - len(lines)) // 2, 0)
             strips = []
-            words = self._message
             for y in range(h):
-                text = words.center(w)[:w] if y == h // 2 and words else " " * w
+                k = y - top
+                text = lines[k].center(w)[:w] if 0 <= k < len(lines) else " " * w
                 strips.append(Strip([Segment(text, base)], w))
         else:
             strips = preview_strips(self._grid, w, h, owner=self._owner, no_color=no_color, base=base)
