@@ -253,8 +253,11 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
     out = Path(out)
     if ros1 and out.suffix != ".bag":
         raise InputError(f"{out}: a ROS 1 bag is a file ending in .bag")
-    if not ros1 and out.suffix == ".bag":
-        raise InputError(f"{out}: a ROS 2 bag is a directory; give a name not ending in .bag")
+    if not ros1 and out.suffix in (".bag", ".db3", ".mcap"):
+        # a folder named x.db3 holding x.db3_0.db3 is not what the name asks for
+        raise InputError(f"{out}: a ROS 2 bag is a directory (its {out.suffix} files are written "
+                         f"inside); give the directory's name, without {out.suffix}"
+                         + (" (--storage mcap chooses MCAP files)" if out.suffix == ".mcap" else ""))
     if out.exists():
         raise InputError(f"{out} already exists; choose another output path")
     parent = out.parent if str(out.parent) else Path(".")
