@@ -14,6 +14,7 @@ placed or none of the rest agrees with the placed ones (those are reported, not 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from numbers import Real
 
 import numpy as np
 
@@ -31,6 +32,8 @@ def pearson_matrix(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     y = np.asarray(y, float)
     if x.ndim != 2 or y.ndim != 2 or x.shape[1] != y.shape[1]:
         raise InputError(f"spectra must be (K, F) and (L, F) with the same F; got {x.shape}, {y.shape}")
+    if not (np.isfinite(x).all() and np.isfinite(y).all()):
+        raise InputError("spectra hold NaN or infinite values; Pearson's rho of them is not defined")
     xc = x - x.mean(axis=1, keepdims=True)
     yc = y - y.mean(axis=1, keepdims=True)
     xn = np.sqrt((xc * xc).sum(axis=1, keepdims=True))
@@ -63,9 +66,14 @@ class PairAgreement:
 
 def agreement(spectra_a: np.ndarray, spectra_b: np.ndarray, theta: float, *, a: int = 0,
               b: int = 1) -> PairAgreement:
-    """Agreeing unique poses of two robots: pairs with ``rho > theta`` (Section 3.3)."""
-    if not -1.0 <= theta <= 1.0:
-        raise InputError(f"theta is a correlation threshold in [-1, 1], got {theta}")
+    """Agreeing unique poses of two robots: pairs with ``rho > theta`` (Section 3.3).
+    ``spectra_a``, ``spectra_b`` are the unique poses' spectra (``UniquePoses.unique_spectra``)."""
+    if isinstance(theta, (bool, np.bool_)) or not isinstance(theta, Real) or not -1.0 <= theta <= 1.0:
+        raise InputError(f"theta is a correlation threshold in [-1, 1], got {theta!r}")
+    for name, spectra in (("spectra_a", spectra_a), ("spectra_b", spectra_b)):
+        if not isinstance(spectra, (np.ndarray, list, tuple)):
+            raise InputError(f"{name} must be an array of spectra (for unique poses, their "
+                             f".unique_spectra), got {type(spectra).__name__}")
     if len(spectra_a) == 0 or len(spectra_b) == 0:
         return PairAgreement(a, b, np.zeros((len(spectra_a), len(spectra_b))),
                              np.zeros((0, 2), int), 0)
@@ -112,9 +120,14 @@ def fusion_order(counts: np.ndarray, *, reference: int | None = None) -> FusionP
     agreement with the placed maps joins, aligned against the placed map it agrees with most.
     """
     counts = np.asarray(counts)
-    n = counts.shape[0]
-    if counts.shape != (n, n):
+    n = counts.shape[0] if counts.ndim else 0
+    if counts.ndim != 2 or counts.shape != (n, n):
         raise InputError(f"agreement counts must be square, got {counts.shape}")
+    if counts.dtype.kind not in "iuf" or not np.isfinite(counts).all() or (counts < 0).any() \
+            or not np.array_equal(counts, counts.T):
+        # NaN made the first step (0, 1) whatever the counts; a step read one map's row only
+        raise InputError("agreement counts must be a symmetric matrix of numbers >= 0 (the "
+                         "agreeing unique poses of each two maps)")
     if reference is not None and (isinstance(reference, bool) or not isinstance(reference, (int, np.integer))
                                   or not 0 <= reference < n):
         # -1 was taken as the last map, which then joined as a new one

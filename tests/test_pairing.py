@@ -54,3 +54,18 @@ def test_fusion_order_refuses_a_reference_that_is_not_a_maps_index(reference):
     with pytest.raises(InputError, match="index of one of the 3 maps"):
         fusion_order(c, reference=reference)
     assert fusion_order(c, reference=2).steps[0][0] == 2
+
+
+def test_counts_thresholds_and_spectra_no_step_can_use_are_refused():
+    """NaN counts made the first step (0, 1) whatever they said; NaN spectra gave NaN rho
+    (documented in [-1, 1]); "0.9" and UniquePoses objects raised a bare TypeError."""
+    for counts in ([[0, np.nan], [np.nan, 0]], [[0, 3], [1, 0]], [[0, -2], [-2, 0]]):
+        with pytest.raises(InputError, match="symmetric matrix of numbers >= 0"):
+            fusion_order(np.array(counts))
+    with pytest.raises(InputError, match="NaN or infinite"):
+        pearson_matrix(np.full((2, 4), np.nan), np.ones((2, 4)))
+    with pytest.raises(InputError, match="theta is a correlation threshold"):
+        agreement(np.ones((2, 4)), np.ones((2, 4)), "0.9")
+    with pytest.raises(InputError, match=r"\.unique_spectra"):
+        agreement(object(), np.ones((2, 4)), 0.9)
+    assert fusion_order(np.array([[0, 2], [2, 0]])).steps == ((0, 1),)
