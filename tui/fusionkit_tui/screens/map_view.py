@@ -58,7 +58,7 @@ class MapScreen(ModalScreen[None]):
         self._grid, self._title, self._owner, self._legend = grid, title, owner, legend
 
     def compose(self) -> ComposeResult:
-        yield Static(f"{self._title}  (escape or m closes)", id="map-title")
+        yield Static(f"{self._title}  (escape, m or q closes)", id="map-title")
         yield MapPreview(id="map-full")
         yield Static(self._legend, id="map-legend")
 
