@@ -258,8 +258,9 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
         raise InputError(f"{out}: a ROS 2 bag is a directory (its {out.suffix} files are written "
                          f"inside); give the directory's name, without {out.suffix}"
                          + (" (--storage mcap chooses MCAP files)" if out.suffix == ".mcap" else ""))
-    if out.exists():
-        raise InputError(f"{out} already exists; choose another output path")
+    if os.path.lexists(out):   # a dangling symbolic link too: the bag would not take its name
+        raise InputError(f"{out} already exists{'' if out.exists() else ' (a symbolic link to nothing)'}; "
+                         f"choose another output path")
     parent = out.parent if str(out.parent) else Path(".")
     if not parent.is_dir():
         raise InputError(f"{out}: the output directory {parent} does not exist; create it first")

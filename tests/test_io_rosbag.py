@@ -109,6 +109,9 @@ def test_export_refuses_existing_output_and_leaves_nothing_on_failure(run_dir, t
         export_rosbag(run_dir, bag)
     with pytest.raises(InputError, match="ends in .bag|ending in .bag"):
         export_rosbag(run_dir, tmp_path / "x", fmt="ros1")
+    (tmp_path / "d.bag").symlink_to(tmp_path / "nowhere")   # said to have "appeared while written"
+    with pytest.raises(InputError, match=r"d.bag already exists \(a symbolic link to nothing\)"):
+        export_rosbag(run_dir, tmp_path / "d.bag", fmt="ros1")
     for name in ("x.db3", "x.mcap"):     # a folder named x.db3 was made, holding x.db3_0.db3
         with pytest.raises(InputError, match=r"a ROS 2 bag is a directory .*without \.(db3|mcap)"):
             export_rosbag(run_dir, tmp_path / name)
