@@ -87,10 +87,12 @@ class PSOConfig:
     patience: int = 25
 
     def __post_init__(self):
-        if not _is_int(self.particles) or self.particles < 1:
-            raise InputError(f"PSO particles must be a whole number >= 1, got {self.particles!r}")
-        if not _is_int(self.iterations) or self.iterations < 0:
-            raise InputError(f"PSO iterations must be a whole number >= 0, got {self.iterations!r}")
+        # the command line's and the terminal UI's ranges: a billion particles asked numpy
+        # for tens of gigabytes
+        if not _is_int(self.particles) or not 1 <= self.particles <= 10_000:
+            raise InputError(f"PSO particles must be a whole number from 1 to 10000, got {self.particles!r}")
+        if not _is_int(self.iterations) or not 0 <= self.iterations <= 100_000:
+            raise InputError(f"PSO iterations must be a whole number from 0 to 100000, got {self.iterations!r}")
         if not _is_int(self.patience) or self.patience < 0:
             raise InputError(f"PSO patience must be a whole number >= 0 (0 = never stop early), "
                              f"got {self.patience!r}")

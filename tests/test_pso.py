@@ -270,3 +270,13 @@ def test_a_seed_that_is_not_a_whole_number_is_one_clear_error():
     a = pso_minimize(lambda X: (X ** 2).sum(axis=1), [(-1, 1)] * 2, seed=np.int64(4))
     b = pso_minimize(lambda X: (X ** 2).sum(axis=1), [(-1, 1)] * 2, seed=4)
     assert np.array_equal(a.x, b.x)
+
+
+def test_a_swarm_larger_than_the_command_line_allows_is_refused():
+    """PSOConfig(particles=10**9) was taken, and numpy then asked for tens of gigabytes."""
+    from fusionkit.errors import InputError
+    with pytest.raises(InputError, match="particles must be a whole number from 1 to 10000"):
+        PSOConfig(particles=10 ** 9)
+    with pytest.raises(InputError, match="iterations must be a whole number from 0 to 100000"):
+        PSOConfig(iterations=10 ** 6)
+    assert PSOConfig(particles=10_000, iterations=100_000).particles == 10_000
