@@ -102,3 +102,29 @@ def test_the_fusion_steps_share_one_legend_under_their_panels():
     sizes = {(round(ax.get_window_extent(renderer).width), round(ax.get_window_extent(renderer).height))
              for ax in panels}
     assert len(sizes) == 1
+
+
+def test_plotting_helpers_refuse_what_they_cannot_draw():
+    """A path or an array as the grid, a merge result as the fused map, a tuple as the
+    transform, too few names or a step past the last raised AttributeError or IndexError."""
+    from matplotlib.figure import Figure
+
+    from fusionkit.errors import InputError
+    from fusionkit.fusion import fuse_maps
+    from fusionkit.plotting import plot_fused, plot_grid
+    from fusionkit.transform import Transform2D
+    from fusionkit.worlds import default_world
+    ax = Figure().add_subplot()
+    world = default_world()
+    for bad in ("map.yaml", world.data):
+        with pytest.raises(InputError, match="plot_grid draws an OccupancyGrid"):
+            plot_grid(ax, bad)
+    with pytest.raises(InputError, match="transform must be a Transform2D"):
+        plot_grid(ax, world, transform=(1.0, 2.0, 0.0))
+    fused = fuse_maps([world, world], [Transform2D(), Transform2D()], keep_steps=True)
+    with pytest.raises(InputError, match="plot_fused draws a FusedMap"):
+        plot_fused(ax, fused.grid)
+    with pytest.raises(InputError, match="a name for each of the 2 maps"):
+        plot_fused(ax, fused, ["a"])
+    with pytest.raises(InputError, match=r"step must be the index of a fusion step \(0 to 1\)"):
+        plot_fused(ax, fused, step=10)

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import InputError
+from ..fusion import FusedMap
+from ..grid import OccupancyGrid
 from .grids import (_SHADE_FREE, _SHADE_OCCUPIED, _SHADE_UNKNOWN, _TINT, _imshow_rgb,
                     _legend_patches, _new_figure, owner_image, plot_grid, robot_colour,
                     state_legend)
@@ -33,9 +35,16 @@ def plot_fused(ax, fused, names=None, *, step: int | None = None, title: str | N
     legend : bool
         Name the robots' colours and the cell states.
     """
+    if not isinstance(fused, FusedMap):
+        raise InputError(f"plot_fused draws a FusedMap (a merge result's .fused, or fuse_maps'), "
+                         f"got {type(fused).__name__}")
     order = list(fused.order)
     n = max(order) + 1 if order else 0
     names = list(names) if names is not None else [f"robot_{k + 1}" for k in range(n)]
+    if len(names) < n:
+        raise InputError(f"give a name for each of the {n} maps fused, got {len(names)}")
+    if step is not None and not (isinstance(step, (int, np.integer)) and 0 <= step < max(len(fused.steps), 1)):
+        raise InputError(f"step must be the index of a fusion step (0 to {len(fused.steps) - 1}), got {step!r}")
     grid = fused.grid
     used = order
     if step is not None:
@@ -81,6 +90,9 @@ def plot_merge(result, maps, *, names=None, title: str | None = None):
     n = len(result.placements)
     if len(maps) != n:
         raise InputError(f"give the {n} maps that were merged, got {len(maps)}")
+    if not all(isinstance(m, OccupancyGrid) for m in maps):
+        raise InputError("plot_merge draws the maps as OccupancyGrid objects (load_map reads a "
+                         "map file)")
     names = list(names) if names is not None else [p.name for p in result.placements]
     rows = int(np.ceil(n / 2))
     fig = _new_figure(14.0, max(6.0, 3.0 * rows))

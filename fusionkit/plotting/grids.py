@@ -51,6 +51,11 @@ def plot_grid(ax, grid: OccupancyGrid, *, transform: Transform2D | None = None, 
     -------
     matplotlib.image.AxesImage
     """
+    if not isinstance(grid, OccupancyGrid):
+        raise InputError(f"plot_grid draws an OccupancyGrid (load a map file with load_map), got "
+                         f"{type(grid).__name__}")
+    if transform is not None and not isinstance(transform, Transform2D):
+        raise InputError(f"transform must be a Transform2D, got {type(transform).__name__}")
     if transform is not None or grid.origin[2] != 0.0:
         t = transform if transform is not None else Transform2D.identity()
         canvas = canvas_for([grid], [t], grid.resolution)
