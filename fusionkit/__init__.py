@@ -26,9 +26,34 @@ Quick start::
 
 from __future__ import annotations
 
+import os as _os
+import signal as _signal
+import sys as _sys
+
+
+def _stopped_while_loading(signum, frame):
+    """A Ctrl-C while the ``fusionkit`` program's modules load, before its command's handler
+    is in place: one line and exit 130, not a traceback out of an import."""
+    try:
+        named = _sys.modules["fusionkit.cli"]._named(_sys.argv[1:])
+    except Exception:   # noqa: BLE001 - the command line is not loaded that far: the program alone
+        named = None
+    _sys.stderr.write(f"fusionkit{' ' + named if named else ''}: interrupted; no output was left "
+                      f"half-written\n")
+    raise SystemExit(130)
+
+
+# first of all, and only in the program itself (not in a Python session that imports fusionkit)
+if _os.path.basename(_sys.argv[0] if _sys.argv else "") == "fusionkit" \
+        and _signal.getsignal(_signal.SIGINT) is _signal.default_int_handler:
+    try:
+        _signal.signal(_signal.SIGINT, _stopped_while_loading)
+    except ValueError:   # not the main thread
+        pass
+
 __version__ = "0.1.0"
 
-import importlib
+import importlib  # noqa: E402
 
 # Public names and the module that defines each. They are imported on first use, so that a
 # command or script pays only for the parts it touches (numba, scipy and OpenCV load slowly).

@@ -11,37 +11,13 @@ Textual, which takes a second): ``fusionkit --help`` lists the commands from :da
 
 from __future__ import annotations
 
-import os
-import signal
+import argparse
+import importlib
+import re
 import sys
 
-
-def _stopped_while_loading(signum, frame):
-    """A Ctrl-C while the program's modules load, before its own handler is in place: one
-    line and exit 130, not a traceback out of an import."""
-    try:
-        named = globals()["_named"](sys.argv[1:])
-    except Exception:   # noqa: BLE001 - the module is not loaded that far: the program alone
-        named = None
-    sys.stderr.write(f"fusionkit{' ' + named if named else ''}: interrupted; no output was left "
-                     f"half-written\n")
-    raise SystemExit(130)
-
-
-# first of all, and only in the program itself (not in a Python session that imports this)
-if os.path.basename(sys.argv[0] if sys.argv else "") == "fusionkit" \
-        and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-    try:
-        signal.signal(signal.SIGINT, _stopped_while_loading)
-    except ValueError:   # not the main thread
-        pass
-
-import argparse  # noqa: E402
-import importlib  # noqa: E402
-import re  # noqa: E402
-
-from .. import _signals  # noqa: E402
-from ..errors import FusionkitError  # noqa: E402
+from .. import _signals
+from ..errors import FusionkitError
 
 __all__ = ["main", "build_parser", "COMMANDS"]
 
