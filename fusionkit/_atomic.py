@@ -154,36 +154,40 @@ def _here(jpath: Path, folder: str) -> bool:
         return True
 
 
-def _recover_folder(folder: Path) -> None:
+def _recover_folder(folder: Path) -> bool:
     """With ``folder`` locked: finish or undo every write of a set of files all in ``folder``
     that a kill cut short (whatever its names), then remove the temporary files killed writes
     left there (no write holds the folder, so none is needed). A set with files in other
-    folders too is left, its backups with it, to the next write of that set, which names them."""
+    folders too is left, its backups with it, to the next write of that set, which names them.
+    True when it changed what the folder holds."""
     try:
         names = os.listdir(folder)
     except OSError:
-        return
+        return False
     real = os.path.realpath(folder)
+    changed = False
     for name in names:
         if (name.startswith(".") and name.endswith(_JOURNAL) and len(name) > len(_JOURNAL) + 1
                 and _here(folder / name, real)):
             _recover(folder / name[1:-len(_JOURNAL)])
-    for name in os.listdir(folder):
+            changed = True
+    for name in os.listdir(folder) if changed else names:
         if _STAGED.fullmatch(name) and not os.path.isdir(folder / name):
             with contextlib.suppress(OSError):
                 os.unlink(folder / name)
+                changed = True
+    return changed
 
 
 def recover_folder(folder: os.PathLike | str, *, wait: bool = True) -> bool:
     """Finish or undo the writes a kill cut short in ``folder`` and remove their temporary
     files (what every write does first in its folders). Without ``wait``, nothing is done while
     another write holds the folder (a reader must not wait on, or deadlock with, a writer).
-    True when the folder was looked at."""
+    True when it changed what the folder holds."""
     folder = Path(folder)
     try:
         with _locked([folder], wait=wait):
-            _recover_folder(folder)
-        return True
+            return _recover_folder(folder)
     except OSError:   # busy, read-only, missing: the reader reads what is there
         return False
 

@@ -23,22 +23,18 @@ MAX_JSON_BYTES = 16 << 20
 MAX_JSON_DEPTH = 64
 
 
-def path_arg(value, what: str) -> Path:
-    """``value`` as a Path, or one :class:`InputError` when it is not a path (None, a grid, a
-    number: pathlib's TypeError said nothing of which argument)."""
-    if isinstance(value, bytes):
-        value = os.fsdecode(value)
-    if not isinstance(value, (str, os.PathLike)):
-        raise InputError(f"{what} must be a path (str or pathlib.Path), got {type(value).__name__}")
-    return Path(value)
+def path_arg(value, what: str, error=InputError) -> Path:
+    """``value`` as a Path, or one ``error`` when it is not a path (None, a grid, a number:
+    pathlib's TypeError said nothing of which argument)."""
+    if not isinstance(value, (str, bytes, os.PathLike)):
+        raise error(f"{what} must be a path (str or pathlib.Path), got {type(value).__name__}")
+    return Path(os.fsdecode(value))
 
 
 def regular_file(path, what: str, error=InputError) -> Path:
     """``path`` as a Path after checking it names an existing regular file (not a folder, FIFO,
     device or socket); raise ``error`` with one line naming the file otherwise."""
-    if not isinstance(path, (str, bytes, os.PathLike)):
-        raise error(f"the {what} must be a path (str or pathlib.Path), got {type(path).__name__}")
-    path = Path(os.fsdecode(path))
+    path = path_arg(path, f"the {what}", error)
     try:
         st = os.stat(path)
     except FileNotFoundError:

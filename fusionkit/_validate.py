@@ -9,7 +9,7 @@ import numpy as np
 from ._atomic import show
 from .errors import InputError
 
-__all__ = ["number", "whole", "random_source"]
+__all__ = ["number", "whole", "random_source", "own_array"]
 
 
 def number(value, name: str) -> float:
@@ -40,3 +40,15 @@ def random_source(seed, name: str = "seed") -> np.random.Generator:
     if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise InputError(f"{name} must be a whole number >= 0, a numpy Generator or None, got {show(seed)}")
     return np.random.default_rng(int(seed))
+
+
+def own_array(array: np.ndarray, given) -> np.ndarray:
+    """``array`` (made from ``given``), copied when it is the caller's array or a view of one
+    that is writeable: freezing it would freeze theirs, and their writes would change it."""
+    if isinstance(given, np.ndarray) and np.may_share_memory(array, given):
+        base = given
+        while isinstance(base, np.ndarray):
+            if base.flags.writeable:
+                return array.copy()
+            base = base.base
+    return array

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import InputError
-from .scanlog import _own
+from ._validate import own_array
 from .transform import Transform2D
 
 __all__ = ["OccupancyGrid", "UNKNOWN", "FREE", "OCCUPIED"]
@@ -73,7 +73,7 @@ class OccupancyGrid:
         if raw.size:
             _check_cells(raw)   # cast as they are, 200 wrapped to -56 and 0.9 fell to 0 (free)
         data = np.ascontiguousarray(raw, dtype=np.int8)
-        data = _own(data, raw)
+        data = own_array(data, raw)
         if data.ndim != 2:
             raise InputError(f"grid data must be 2-D (rows, cols), got shape {data.shape}")
         try:

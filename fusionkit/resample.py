@@ -80,6 +80,7 @@ def resample(source: OccupancyGrid, transform: Transform2D, target: OccupancyGri
     a, b = _cell_affine(source, transform, target)
     out = _resample_kernel(source.data, a[0, 0], a[0, 1], a[1, 0], a[1, 1], b[0], b[1],
                            target.rows, target.cols, np.int8(UNKNOWN))
+    out.setflags(write=False)   # made here: the grid takes it without a copy
     return OccupancyGrid(out, target.resolution, target.origin, source.name)
 
 
@@ -132,7 +133,9 @@ def canvas_for(grids, transforms, resolution: float, margin_cells: int = 2) -> O
         raise InputError(f"the maps placed so cover {xmax - xmin:.6g} x {ymax - ymin:.6g} m: at "
                          f"{resolution:g} m cells, {cols} x {rows} cells, more than the {MAX_CELLS} "
                          f"fusionkit can hold; use a coarser resolution or check the transforms")
-    return OccupancyGrid(np.full((rows, cols), UNKNOWN, np.int8), resolution, (x0, y0, 0.0))
+    cells = np.full((rows, cols), UNKNOWN, np.int8)
+    cells.setflags(write=False)   # made here: the grid takes it without a copy
+    return OccupancyGrid(cells, resolution, (x0, y0, 0.0))
 
 
 from ._callable_module import callable_as  # noqa: E402

@@ -19,6 +19,7 @@ import numpy as np
 
 from ._atomic import _short, show, write_bytes_atomic
 from ._inputs import path_arg, regular_file
+from ._validate import own_array
 from .errors import ScanLogError
 
 __all__ = ["ScanLog", "load_scans", "save_scans", "encode_scans", "scans_path_for"]
@@ -31,18 +32,6 @@ MAX_COORDINATE = 1e9
 #: Most bytes the arrays of one scan log may take once loaded (a zip bomb is refused unread).
 MAX_SCAN_BYTES = 2_000_000_000
 _ZIP_SIGNATURES = (b"PK\x03\x04", b"PK\x05\x06")
-
-
-def _own(array: np.ndarray, given) -> np.ndarray:
-    """``array`` (made from ``given``), copied when it is the caller's array or a view of one
-    that is writeable: freezing it would freeze theirs, and their writes would change it."""
-    if isinstance(given, np.ndarray) and np.may_share_memory(array, given):
-        base = given
-        while isinstance(base, np.ndarray):
-            if base.flags.writeable:
-                return array.copy()
-            base = base.base
-    return array
 
 
 @dataclass(frozen=True, eq=False)
@@ -114,7 +103,7 @@ class ScanLog:
             raise ScanLogError(f"the beams span {span:.6g} rad from angle_min {self.angle_min:.6g} rad, "
                                f"more than a full turn: give angle_min and angle_increment in radians")
         # the caller's arrays (or views of them) are neither frozen nor aliased
-        poses, ranges = (_own(a, getattr(self, name)) for a, name in ((poses, "poses"), (ranges, "ranges")))
+        poses, ranges = (own_array(a, getattr(self, name)) for a, name in ((poses, "poses"), (ranges, "ranges")))
         poses.setflags(write=False)
         ranges.setflags(write=False)
         object.__setattr__(self, "poses", poses)

@@ -73,11 +73,11 @@ class Transform2D:
             raise InputError("the matrix holds NaN or infinite values")
         if m.shape == (3, 3) and not np.allclose(m[2], (0.0, 0.0, 1.0), atol=1e-6):
             raise InputError(f"a rigid motion's matrix has the last row 0 0 1, got {m[2].tolist()}")
-        sv = np.linalg.svd(m[:2, :2], compute_uv=False)
-        if np.linalg.det(m[:2, :2]) <= 0 or np.abs(sv - 1.0).max() > 0.01:
+        sv, det = np.linalg.svd(m[:2, :2], compute_uv=False), np.linalg.det(m[:2, :2])
+        if det <= 0 or np.abs(sv - 1.0).max() > 0.01:
             # atan2 of a reflection or a scaling gives some rotation: not the motion given
             raise InputError(f"the matrix's 2x2 part is not a rotation (singular values "
-                             f"{sv[0]:.4g}, {sv[1]:.4g}, determinant {np.linalg.det(m[:2, :2]):.4g}): "
+                             f"{sv[0]:.4g}, {sv[1]:.4g}, determinant {det:.4g}): "
                              f"a reflection or a scaling is not a rigid motion")
         return cls(m[0, 2], m[1, 2], math.atan2(m[1, 0] - m[0, 1], m[0, 0] + m[1, 1]))
 

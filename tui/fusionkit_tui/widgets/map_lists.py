@@ -56,8 +56,7 @@ class MapTree(DirectoryTree):
         paths = list(paths)
         if paths and recover_folder(paths[0].parent, wait=False):
             # a write a kill cut short there was finished or undone: list what is there now
-            paths = [p for p in paths if p.exists()] + [
-                p for p in sorted(paths[0].parent.iterdir()) if p not in paths]
+            paths = list(paths[0].parent.iterdir())
         return [p for p in paths
                 if not p.name.startswith(".") and (self._safe_is_dir(p) or is_map_file(p))]
 
