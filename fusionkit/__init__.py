@@ -53,7 +53,7 @@ if _os.path.basename(_sys.argv[0] if _sys.argv else "") == "fusionkit" \
 
 __version__ = "0.1.0"
 
-import importlib  # noqa: E402
+import importlib as _importlib  # noqa: E402
 
 # Public names and the module that defines each. They are imported on first use, so that a
 # command or script pays only for the parts it touches (numba, scipy and OpenCV load slowly).
@@ -83,10 +83,12 @@ def __getattr__(name):
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'fusionkit' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    value = getattr(_importlib.import_module(f".{module}", __name__), name)
     globals()[name] = value
     return value
 
 
 def __dir__():
-    return sorted(set(globals()) | set(_EXPORTS))
+    # the public names and the modules loaded so far, not this module's own helpers
+    return sorted(name for name in set(globals()) | set(_EXPORTS)
+                  if not name.startswith("_") and name != "annotations" or name in ("__version__", "__doc__"))

@@ -9,7 +9,7 @@ import numpy as np
 from ._atomic import show
 from .errors import InputError
 
-__all__ = ["number", "whole", "random_source", "own_array"]
+__all__ = ["number", "whole", "digits_arg", "random_source", "own_array"]
 
 
 def number(value, name: str) -> float:
@@ -30,6 +30,16 @@ def whole(value, name: str) -> int:
             return int(value)
         raise InputError(f"{name} must be a whole number, got {show(value)}")
     return int(value)
+
+
+def digits_arg(digits) -> int | None:
+    """``digits`` of rounding as given to an ``as_dict``: ``None`` (no rounding) or a whole
+    number >= 0, else :class:`InputError` (``round`` said only "cannot be interpreted")."""
+    if digits is None:
+        return None
+    if isinstance(digits, (bool, np.bool_)) or not isinstance(digits, (int, np.integer)) or digits < 0:
+        raise InputError(f"digits must be None or a whole number >= 0, got {show(digits)}")
+    return int(digits)
 
 
 def random_source(seed, name: str = "seed") -> np.random.Generator:

@@ -51,12 +51,13 @@ import math
 import os
 from collections import Counter
 from dataclasses import dataclass, field
+from numbers import Real
 from types import MappingProxyType
 from typing import Mapping
 
 import numpy as np
 
-from ._atomic import _short
+from ._atomic import _short, show
 from ._inputs import regular_file
 from .errors import InputError
 from .scanlog import ScanLog
@@ -91,10 +92,14 @@ class CarmenConfig:
     range_cap: float = 40.0
 
     def __post_init__(self):
-        if self.max_range is not None and not (math.isfinite(self.max_range) and self.max_range > 0):
-            raise InputError(f"max_range must be a positive number of metres, got {self.max_range}")
-        if not (math.isfinite(self.range_cap) and self.range_cap > 0):
-            raise InputError(f"range_cap must be a positive number of metres, got {self.range_cap}")
+        for name in ("max_range", "range_cap"):
+            v = getattr(self, name)
+            if v is None and name == "max_range":
+                continue
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (Real, np.number)) \
+                    or not (math.isfinite(v) and v > 0):
+                none = " or None" if name == "max_range" else ""
+                raise InputError(f"{name} must be a positive number of metres{none}, got {show(v)}")
 
 
 @dataclass(frozen=True)

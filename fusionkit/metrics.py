@@ -21,6 +21,7 @@ from numbers import Real
 
 import numpy as np
 
+from ._validate import digits_arg
 from .errors import InputError
 from .grid import OccupancyGrid
 from .resample import resample
@@ -79,6 +80,7 @@ class MapMetrics:
     def as_dict(self, digits: int | None = 4) -> dict:
         """Plain ``{name: value}`` (percentages rounded to ``digits`` unless ``None``)."""
         d = asdict(self)
+        digits = digits_arg(digits)
         if digits is not None:
             for k, v in d.items():
                 if isinstance(v, float):
@@ -202,7 +204,7 @@ class TransformError:
     rotation_deg: float
 
     def as_dict(self, digits: int | None = 4) -> dict:
-        d = asdict(self)
+        d, digits = asdict(self), digits_arg(digits)
         return {k: round(v, digits) for k, v in d.items()} if digits is not None else d
 
 

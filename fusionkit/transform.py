@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ._validate import digits_arg
 from .errors import InputError
 
 __all__ = ["Transform2D", "wrap_angle"]
@@ -163,5 +164,6 @@ class Transform2D:
         return dt <= atol and dr <= atol
 
     def as_dict(self, digits: int | None = 6) -> dict:
+        digits = digits_arg(digits)
         r = (lambda v: round(v, digits)) if digits is not None else float
         return {"x": r(self.x), "y": r(self.y), "theta": r(self.theta)}

@@ -322,3 +322,12 @@ def test_scan_indices_out_of_range_and_resample_arguments_of_the_wrong_kind():
     with pytest.raises(InputError, match="takes two OccupancyGrid maps and a Transform2D, got "
                                          "OccupancyGrid, tuple, OccupancyGrid"):
         resample(g, (0.0, 0.0, 0.0), g)
+
+
+def test_the_package_offers_its_public_names_and_not_its_own_helpers():
+    import fusionkit
+    names = dir(fusionkit)           # what tab completion in a notebook offers
+    assert set(fusionkit.__all__) <= set(names)
+    assert not {"importlib", "annotations"} & set(names)
+    assert not [n for n in names if n.startswith("_") and n not in ("__version__", "__doc__")]
+    assert all(getattr(fusionkit, n) is not None for n in fusionkit.__all__)

@@ -157,6 +157,15 @@ def test_max_range_option_and_single_max_is_a_reading(tmp_path):
     np.testing.assert_array_equal(np.isinf(c.scans.ranges[0]), [False, False, True, True])
 
 
+@pytest.mark.parametrize("kw", [{"max_range": "10"}, {"max_range": True}, {"max_range": -1.0},
+                                {"range_cap": None}, {"range_cap": "40"}, {"range_cap": float("inf")}])
+def test_a_carmen_config_of_the_wrong_kind_is_refused_in_one_line(kw):
+    (name, value), = kw.items()
+    with pytest.raises(InputError, match=rf"^{name} must be a positive number of metres.*, got "):
+        CarmenConfig(**kw)
+    assert CarmenConfig(max_range=np.float32(10.0), range_cap=30).range_cap == 30
+
+
 def test_a_log_with_no_reading_left_is_refused_not_imported_as_an_empty_map(tmp_path):
     lines = [flaser([1.0, 5.0, 12.0, 50.0], (0, 0, 0), 1), flaser([1.0, 2.0, 3.0, 4.0], (0, 0, 0), 2)]
     p = write(tmp_path, lines)

@@ -142,6 +142,16 @@ def test_a_map_with_one_wrong_cell_is_never_printed_as_perfect():
     assert format_percent(99.996, 2, 7) == "  99.99" and format_percent(12.345, 1) == "12.3"
 
 
+@pytest.mark.parametrize("digits", ["2", 2.5, -1, True])
+def test_a_rounding_of_the_wrong_kind_is_refused_in_one_line(digits):
+    m = evaluate_map(grid(np.full((4, 4), F, np.int8)), grid(np.full((4, 4), F, np.int8)))
+    error = transform_errors(Transform2D(0.1, 0.0, 0.0), Transform2D(), 0.05)
+    for as_dict in (m.as_dict, error.as_dict, Transform2D(1.0, 2.0, 0.3).as_dict):
+        with pytest.raises(InputError, match=r"^digits must be None or a whole number >= 0, got "):
+            as_dict(digits)
+        assert as_dict(np.int64(1)) == as_dict(1) and as_dict(None) is not None
+
+
 def test_table1_rows_and_labels():
     steps = [grid(FUSED), grid(TRUTH)]
     rows = table1(steps, grid(TRUTH))
