@@ -98,10 +98,23 @@ class MapTree(DirectoryTree):
             path = Path(self.path)
         self.post_message(self.AddDirectory(path if self._safe_is_dir(path) else path.parent))
 
+    class WentUp(Message):
+        """The tree now lists ``path``, the folder above the one it listed."""
+
+        def __init__(self, path: Path) -> None:
+            super().__init__()
+            self.path = path
+
+    async def watch_path(self) -> None:
+        await super().watch_path()
+        if not str(self.root.label):     # the file system's root has no name of its own
+            self.root.set_label(str(self.path))
+
     def action_parent(self) -> None:
         here = Path(self.path).resolve()
         if here.parent != here:
             self.path = here.parent
+            self.post_message(self.WentUp(here.parent))
 
 
 #: What x and f say with no map selected

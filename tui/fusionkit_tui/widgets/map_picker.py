@@ -295,10 +295,17 @@ class MapsPane(Vertical):
         if entry is not None and is_map_file(entry.path):
             self._preview(entry.path)
         elif entry is not None and event.node is not event.node.tree.root and entry.path.is_dir():
-            # not the last map's preview (or its "cannot read") beside a highlighted folder
-            self._previewing = None
-            self.query_one("#info", Static).update(f"{entry.path.name or entry.path}/: a folder")
-            self.query_one(MapPreview).clear("a folder: enter expands it, a adds its maps")
+            self._show_folder(entry.path)
+
+    @on(MapTree.WentUp)
+    def _on_went_up(self, event: MapTree.WentUp) -> None:
+        self._show_folder(event.path)     # the cursor is on the new top folder
+
+    def _show_folder(self, path: Path) -> None:
+        # not the last map's preview (or its "cannot read") beside a highlighted folder
+        self._previewing = None
+        self.query_one("#info", Static).update(f"{path.name or path}{'/' if path.name else ''}: a folder")
+        self.query_one(MapPreview).clear("a folder: enter expands it, a adds its maps")
 
     @on(DataTable.RowHighlighted)
     def _on_row_highlight(self, event: DataTable.RowHighlighted) -> None:
