@@ -408,6 +408,23 @@ async def test_cancel_stops_the_merge_and_the_app_stays_usable(in_root):
         assert screen.query_one("#placements", DataTable).row_count == ROBOTS
 
 
+async def test_no_swarm_iterations_is_said_in_words_not_shown_as_an_empty_chart(in_root):
+    """With 0 PSO iterations the paper's method's swarms never report, and the Run tab showed
+    an empty chart under its usual title, as if the plot had failed."""
+    app = make_app(["run"])
+    async with app.run_test(size=(100, 32)) as pilot:
+        await ready(pilot)
+        screen = app.main
+        await run_merge(pilot, {"iterations": "0"})
+        assert screen.result is not None and screen.result.config.method == "spectral-pso"
+        assert not screen.run_panel.plot.display
+        said = str(screen.run_panel.query_one("#no-swarm").render())
+        assert "0 PSO iterations" in said and screen.run_panel.query_one("#no-swarm").display
+        await run_merge(pilot, FAST)                       # and the chart is back with them
+        assert screen.run_panel.plot.display and screen.run_panel.plot.series
+        assert not screen.run_panel.query_one("#no-swarm").display
+
+
 async def test_the_consensus_method_runs_from_the_settings(in_root):
     from textual.widgets import Select
     app = make_app(["run"])

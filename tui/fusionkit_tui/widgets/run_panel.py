@@ -188,9 +188,12 @@ class RunPanel(Vertical):
         self._iterations = iterations
         self._stage, self._step, self._where = "", -1, (0, 0)
         self._stage_list = stages_of(method)
-        swarm = method == "spectral-pso"
+        swarm = method == "spectral-pso" and iterations > 0
         self.plot.reset("" if swarm else
-                        f"{method}: no swarm to watch (the paper's method, spectral-pso, has one)")
+                        f"{method}: no swarm to watch (the paper's method, spectral-pso, has one)"
+                        if method != "spectral-pso" else
+                        "spectral-pso with 0 PSO iterations (Settings): its swarms do not move, "
+                        "so there is no convergence to watch")
         self.plot.display = swarm
         note = self.query_one("#no-swarm", Static)
         note.update(self.plot.note)
