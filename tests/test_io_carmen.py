@@ -302,6 +302,10 @@ def test_cli_imports_and_reports(tmp_path, capsys):
     assert "6 FLASER scans kept" in out
     assert {f.name for f in (tmp_path / "o").iterdir()} >= {
         "robot_1.yaml", "robot_2.scans.npz", "world.yaml", "world.pgm", "truth.json"}
+    assert _main(["import", "carmen", str(p), "--out", str(tmp_path / "q"), "--split", "2",
+                  "--quiet"]) == 0
+    assert capsys.readouterr() == ("", "")
+    assert sorted(f.name for f in (tmp_path / "q").iterdir()) == sorted(f.name for f in (tmp_path / "o").iterdir())
 
 
 def test_a_split_over_an_earlier_run_says_which_of_its_files_it_removed(tmp_path, capsys):

@@ -357,6 +357,14 @@ def test_cli_export_and_import(run_dir, tmp_path, capsys):
     assert "kept 40 scans" in capsys.readouterr().out
     got = load_scans(tmp_path / "o" / "run.scans.npz")
     np.testing.assert_array_equal(got.ranges, load_scans(run_dir / "robot_2.scans.npz").ranges)
+    # --quiet, as merge and simulate take it in scripts: nothing printed, the same files
+    assert _main(["export", "rosbag", str(run_dir), "--out", str(tmp_path / "q.bag"), "--quiet"]) == 0
+    assert _main(["import", "rosbag", str(tmp_path / "q.bag"), "--scan-topic", "/robot_2/scan",
+                  "--tf", "--fixed-frame", "robot_2/map", "--out", str(tmp_path / "q"),
+                  "--resolution", "0.1", "--quiet"]) == 0
+    assert capsys.readouterr() == ("", "")
+    assert (tmp_path / "q.bag").read_bytes() == bag.read_bytes()
+    np.testing.assert_array_equal(load_scans(tmp_path / "q" / "q.scans.npz").ranges, got.ranges)
 
 
 @pytest.mark.parametrize("case", ["topic", "bag", "export_exists", "export_ros1_name",

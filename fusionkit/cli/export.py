@@ -42,6 +42,7 @@ def register(sub) -> None:
                    metavar="HZ", help="scans per second per robot (default: %(default)s Hz)")
     b.add_argument("--start", type=float_range(0.0, 2.0 ** 31), default=1.0, metavar="S",
                    help="stamp of the first scan in seconds (default: %(default)s s)")
+    b.add_argument("--quiet", action="store_true", help="print nothing on success")
     b.set_defaults(func=run_rosbag)
 
 
@@ -53,12 +54,14 @@ def run_rosbag(args) -> int:
                          f"({'--format ros1' if args.fmt else 'the output ends in .bag'}); drop "
                          f"--storage, or give a ROS 2 bag's directory name")
     left = _robots_without_scans(Path(args.run_dir))   # read before any output is written
-    progress = Progress("export")
+    progress = Progress("export", enabled=False if args.quiet else None)
     try:
         res = export_rosbag(args.run_dir, args.out, fmt=fmt, storage=args.storage or "sqlite3",
                             rate=args.rate, start_s=args.start, progress=progress)
     finally:
         progress.close()
+    if args.quiet:
+        return 0
     for r in res.robots:
         maps = f", {r.map_topic}" if r.map_topic else " (no map beside the scans)"
         print(f"  {r.name}: {r.scans} scans on {r.scan_topic}, {r.odom_topic}{maps}")

@@ -74,6 +74,7 @@ def register(sub) -> None:
                         "when dazzled)")
     c.add_argument("--force", action="store_true",
                    help="replace output files that already exist (an input is never replaced)")
+    c.add_argument("--quiet", action="store_true", help="print nothing on success")
     c.set_defaults(func=run_carmen)
 
     b = kinds.add_parser(
@@ -120,6 +121,7 @@ def register(sub) -> None:
                         "first scan")
     b.add_argument("--force", action="store_true",
                    help="replace output files that already exist (an input is never replaced)")
+    b.add_argument("--quiet", action="store_true", help="print nothing on success")
     b.set_defaults(func=run_rosbag)
 
 
@@ -129,7 +131,7 @@ def _skipped(skipped) -> str:
 
 def run_carmen(args) -> int:
     t0 = time.perf_counter()
-    progress = Progress("import")
+    progress = Progress("import", enabled=False if args.quiet else None)
     try:
         res = import_carmen(
             args.log, args.out, name=args.name, split=args.split, overlap=args.overlap,
@@ -138,6 +140,8 @@ def run_carmen(args) -> int:
             progress=progress)
     finally:
         progress.close()
+    if args.quiet:
+        return 0
     s = res.stats
     nr = f"{s.no_return_value:g} m" if s.no_return_value is not None else "none found"
     print(f"{args.log}: {s.records} records, {s.scans} {s.kind} scans kept; skipped: "
@@ -163,7 +167,7 @@ def run_rosbag(args) -> int:
     t0 = time.perf_counter()
     source = PoseSource(odom_topic=args.odom_topic, use_tf=args.tf,
                         fixed_frame=args.fixed_frame, base_frame=args.base_frame)
-    progress = Progress("import")
+    progress = Progress("import", enabled=False if args.quiet else None)
     try:
         res = import_rosbag(args.bag, args.out, scan_topic=args.scan_topic, poses=source,
                             name=args.name, resolution=args.resolution,
@@ -171,6 +175,8 @@ def run_rosbag(args) -> int:
                             overwrite=args.force, progress=progress)
     finally:
         progress.close()
+    if args.quiet:
+        return 0
     s, r = res.stats, res.robot
     print(f"{args.bag}: {s.scan_messages} scans on {args.scan_topic}, "
           f"{s.pose_messages or s.tf_messages} pose messages; kept {s.scans} scans "
