@@ -556,7 +556,8 @@ async def test_a_map_has_one_name_on_every_tab_beside_an_unreadable_namesake(in_
 
 async def test_a_highlighted_folder_is_not_shown_beside_the_last_maps_preview(in_root):
     """Its row in the tree kept the preview of the map highlighted before (or its "cannot read
-    this map"), as if it were that map's."""
+    this map"), as if it were that map's; so did the folder above after u, and at the file
+    system's root the folder had no name."""
     app = make_app(["."])
     async with app.run_test(size=(100, 32)) as pilot:
         await ready(pilot)
@@ -574,24 +575,12 @@ async def test_a_highlighted_folder_is_not_shown_beside_the_last_maps_preview(in
         await until(pilot, lambda: preview.grid is None)
         assert "folder" in preview._message
         assert "run/: a folder" in str(maps.query_one("#info").render())
-
-
-async def test_going_up_shows_the_new_folder_not_the_last_maps_preview(in_root):
-    """After u the cursor is on the folder above, and the preview beside it still showed the map
-    (or the "cannot read") highlighted before; at the file system's root the folder had no name."""
-    app = make_app(["run"])
-    async with app.run_test(size=(100, 32)) as pilot:
-        await ready(pilot)
-        maps = app.main.maps
-        preview = maps.query_one("#preview")
-        tree = app.main.query_one(MapTree)
-        tree.focus()
-        tree.cursor_line = next(n.line for n in tree.root.children if n.data.path.name == "robot_1.yaml")
+        tree.cursor_line = next(n.line for n in folder.children if n.data.path.name == "robot_1.yaml")
         await until(pilot, lambda: preview.grid is not None)
-        await pilot.press("u")
+        await pilot.press("u")                # the cursor goes to the folder above
         await until(pilot, lambda: preview.grid is None)
         assert "folder" in preview._message
-        assert f"{Path.cwd().name}/: a folder" in str(maps.query_one("#info").render())
+        assert f"{Path.cwd().parent.name}/: a folder" in str(maps.query_one("#info").render())
         tree.path = Path("/")
         await until(pilot, lambda: str(tree.root.label) == "/")
 
