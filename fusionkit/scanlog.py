@@ -20,7 +20,7 @@ import numpy as np
 from ._atomic import _short, show, write_bytes_atomic
 from ._inputs import path_arg, regular_file
 from ._validate import own_array
-from .errors import ScanLogError
+from .errors import InputError, ScanLogError
 
 __all__ = ["ScanLog", "load_scans", "save_scans", "encode_scans", "scans_path_for"]
 
@@ -163,6 +163,8 @@ class ScanLog:
 def scans_path_for(map_yaml) -> Path:
     """``NAME.scans.npz`` beside ``NAME.yaml``."""
     p = path_arg(map_yaml, "the map's YAML")
+    if not p.name:
+        raise InputError(f"{p}: is a folder, not a map's YAML; give the file's path")
     return p.with_name(p.stem + ".scans.npz")
 
 

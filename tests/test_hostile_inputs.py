@@ -235,6 +235,11 @@ CASES = [
     ("--report is a folder", _merge_out(report="out/r", mkdir="out/r"), "folder"),
     ("-o is an existing folder", _merge_out(out="out/d.yaml", mkdir="out/d.yaml"), "folder"),
     ("-o in a missing folder", _merge_out(out="nowhere/m.yaml"), "does not exist"),
+    ("/ as a map to merge", lambda d: ["merge", str(d / "A.yaml"), "/", "-o", str(d / "out" / "m.yaml")],
+     "/: is a directory, not a map"),
+    (". as the map to evaluate", lambda d: (d / "truth.json").write_text(json.dumps(
+        {"world": "A.yaml", "robots": [{"name": "A", "transform": {"x": 0, "y": 0, "theta": 0}}]}))
+     and ["evaluate", ".", "--truth", str(d / "truth.json")], ".: is a directory, not a map"),
     ("truth.json nested 100000 deep", _evaluate(DEEP), "nested"),
     ("report nested 100000 deep",
      _evaluate(json.dumps({"world": "A.yaml", "robots": [{"name": "A", "transform": {"x": 0, "y": 0, "theta": 0}}]}),

@@ -596,6 +596,7 @@ def test_what_is_not_a_path_or_a_grid_is_one_clear_error(tmp_path):
                        (lambda: load_map(grid), "got OccupancyGrid"),
                        (lambda: map_info(5), "the map's YAML must be a path"),
                        (lambda: scans_path_for(None), "the map's YAML must be a path"),
+                       (lambda: scans_path_for("/"), "/: is a folder, not a map's YAML"),
                        (lambda: save_map(str(tmp_path / "m.yaml"), grid), "writes an OccupancyGrid first")):
         with pytest.raises(InputError, match=said):
             call()

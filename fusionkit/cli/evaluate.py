@@ -172,6 +172,8 @@ def find_report(merged, report=None) -> Path | None:
     merged = Path(merged)
     if report is not None:
         return Path(report)
+    if not merged.name:     # "." or "/": a folder, refused as such when the map is read
+        return None
     cands = [merged.with_name(merged.stem + ".report.json"), merged.with_name("report.json")]
     if _group_number(merged) is not None:
         cands.insert(1, merged.with_name(merged.stem.rpartition(".")[0] + ".report.json"))

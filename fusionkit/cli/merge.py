@@ -181,7 +181,9 @@ def protected_inputs(inputs) -> list[Path]:
     """Every file a merge reads: each map YAML, the image it names and its scan log."""
     from ..mapio import _protected
 
-    return _protected(inputs) + [Path(m).with_name(Path(m).stem + ".scans.npz") for m in inputs]
+    # (a path with no name of its own, "." or "/", is no map: refused as a folder when read)
+    return _protected(inputs) + [Path(m).with_name(Path(m).stem + ".scans.npz") for m in inputs
+                                 if Path(m).name]
 
 
 #: How :func:`check_not_input` names a file of :func:`run_truth`
