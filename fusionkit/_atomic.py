@@ -36,7 +36,7 @@ from typing import Iterable, Iterator, Sequence
 from . import _signals
 from ._guards import (_check_target, _parent, _short, _write_error, check_distinct,  # noqa: F401
                       check_not_input, check_out_dir, check_writable, describe_os_error,
-                      make_out_dir, made_out_dir, show)
+                      dead_export, make_out_dir, made_out_dir, show)
 from .errors import InputError
 
 __all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_set", "recover_set", "recover_folder",
@@ -176,6 +176,9 @@ def _recover_folder(folder: Path) -> bool:
             with contextlib.suppress(OSError):
                 os.unlink(folder / name)
                 changed = True
+        elif dead_export(folder, name):   # a killed export rosbag's folder, of any output name
+            shutil.rmtree(folder / name, ignore_errors=True)
+            changed = True
     return changed
 
 

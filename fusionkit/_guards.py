@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import re
 from pathlib import Path
 from typing import Sequence
 
@@ -195,3 +196,22 @@ def check_distinct(named_outputs: Sequence[tuple[str, os.PathLike | str]]) -> No
             raise InputError(f"{_short(p)}: {what} and {seen[r]} are the same file; "
                              f"give them different paths")
         seen[r] = what
+
+
+#: The temporary folder of a ROS bag export (``.NAME.PID.XXXXXXXX.tmp``, ``tempfile.mkdtemp``'s)
+_EXPORT_TMP = re.compile(r"\..+\.(\d+)\.[A-Za-z0-9_]+\.tmp")
+
+
+def dead_export(folder: Path, name: str) -> bool:
+    """Whether ``folder / name`` is the temporary folder of a bag export whose process is gone
+    (killed before it could remove it)."""
+    m = _EXPORT_TMP.fullmatch(name)
+    if m is None or os.path.islink(folder / name) or not os.path.isdir(folder / name):
+        return False
+    try:
+        os.kill(int(m.group(1)), 0)
+    except ProcessLookupError:
+        return True
+    except (PermissionError, OverflowError):   # another user's process, or no PID at all
+        return False
+    return False

@@ -6,7 +6,8 @@
 (``nav_msgs/OccupancyGrid``, once, at the first stamp) and the same pose on ``/tf``
 (``NAME/map`` -> ``NAME/laser``), stamped at a fixed rate from a common start time. The bag is
 written in a temporary folder beside the output and moved into place when complete; the
-temporary folders of killed exports are removed by the next export to the same output.
+temporary folders of killed exports are removed by the next export or other write into that
+folder, or read of a map there (whatever its name).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from ._atomic import check_writable
-from ._guards import _write_error
+from ._guards import _write_error, dead_export
 from .errors import InputError
 from .scanlog import ScanLog, load_scans
 
@@ -273,7 +274,7 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
                          f"(2147483648), the latest time a ROS message holds; give a higher rate or "
                          f"an earlier start")
 
-    _sweep_dead_exports(parent, out.name)
+    _sweep_dead_exports(parent)
     try:
         tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".tmp",
                                        dir=parent))
@@ -315,28 +316,15 @@ def _flush(bag: Path) -> None:
             os.close(fd)
 
 
-def _sweep_dead_exports(parent: Path, name: str) -> None:
-    """Remove the temporary folders of exports to ``name`` whose process is gone (killed)."""
-    pattern = re.compile(re.escape(f".{name}.") + r"(\d+)\.[A-Za-z0-9_]+\.tmp")
+def _sweep_dead_exports(parent: Path) -> None:
+    """Remove the temporary folders of exports into ``parent`` whose process is gone (killed)."""
     try:
         entries = os.listdir(parent)
     except OSError:
         return
     for entry in entries:
-        m = pattern.fullmatch(entry)
-        if m is None or _alive(int(m.group(1))):
-            continue
-        shutil.rmtree(parent / entry, ignore_errors=True)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OverflowError):
-        return True
-    return True
+        if dead_export(parent, entry):
+            shutil.rmtree(parent / entry, ignore_errors=True)
 
 
 def _stamp_ns(start_s: float, rate: float, i: int) -> int:

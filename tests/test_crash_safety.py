@@ -476,6 +476,8 @@ def test_ctrl_c_during_start_up_is_one_line_and_exit_130(monkeypatch, capsys):
 
 
 def test_an_export_sweeps_the_temporary_folder_a_killed_export_left(tmp_path):
+    """... and so does any later write or read of a map in its folder, whatever the names (only
+    an export to that same output removed it)."""
     from fusionkit.rosbag_export import export_rosbag
     from fusionkit.scanlog import ScanLog, save_scans
 
@@ -491,9 +493,17 @@ def test_an_export_sweeps_the_temporary_folder_a_killed_export_left(tmp_path):
     (killed / "run_bag" / "run_bag_0.db3").write_bytes(b"half")
     mine = tmp_path / f".run_bag.{os.getpid()}.xyz789.tmp"  # a live export's folder is left alone
     mine.mkdir()
+    other = tmp_path / f".other_bag.{int(dead.stdout)}.k3x_9q2z.tmp"    # of another output
+    (other / "other_bag").mkdir(parents=True)
     res = export_rosbag(run, tmp_path / "run_bag")
-    assert res.path.is_dir() and not killed.exists() and mine.exists()
+    assert res.path.is_dir() and not killed.exists() and not other.exists() and mine.exists()
     assert sorted(p.name for p in tmp_path.iterdir()) == [mine.name, "run", "run_bag"]
+    (killed / "run_bag").mkdir(parents=True)
+    save_map(OccupancyGrid(np.zeros((4, 4), np.int8), 0.1), tmp_path / "m.yaml")  # any write
+    assert not killed.exists() and mine.exists()
+    (killed / "run_bag").mkdir(parents=True)
+    load_map(tmp_path / "m.yaml")                                           # a map read there
+    assert not killed.exists() and mine.exists()
 
 
 @pytest.mark.parametrize("command", ["simulate", "import"])
