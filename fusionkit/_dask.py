@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import re
 import signal
 import threading
 
@@ -136,6 +137,15 @@ class DaskExecutor(Executor):
                 self.close()
                 raise InputError(f"the Dask scheduler at {address} has no workers (waited "
                                  f"{timeout:g} s); start some with dask worker {address}") from None
+            # workers started elsewhere may lack fusionkit: said now, not as a task's traceback
+            # (exec is Python's own, so it reaches a worker without fusionkit)
+            failed = [e for e in self._client.run(exec, "import fusionkit", on_error="return").values()
+                      if isinstance(e, BaseException)]
+            if failed:
+                self.close()
+                raise InputError(f"the Dask workers at {address} cannot import fusionkit "
+                                 f"({failed[0]}); install the same fusionkit (with its "
+                                 f"dependencies) on every worker") from None
             self.workers = max(1, sum(w.get("nthreads", 1) for w in
                                       self._client.scheduler_info().get("workers", {}).values()))
             self._dashboard = True
@@ -253,6 +263,17 @@ class DaskExecutor(Executor):
             raise InputError(f"the Dask scheduler at {client.scheduler.address} was lost after "
                              f"{done} of {total} tasks ({why}); nothing was written: check the "
                              f"scheduler and run again") from None
+        except Exception as exc:
+            # workers of a cluster started elsewhere without fusionkit (or a package it needs):
+            # the task, or the data sent to them, cannot be unpickled there
+            missing = re.search(r"No module named '([\w.]+)'", f"{exc} {exc.__cause__}")
+            if missing is None:
+                raise
+            who = "scheduler" if "task graph" in str(exc) else "workers"
+            raise InputError(f"the Dask {who} at {client.scheduler.address} cannot import "
+                             f"{missing.group(1)}; install the same fusionkit (with its "
+                             f"dependencies) {'beside it' if who == 'scheduler' else 'on every worker'}") \
+                from None
         finally:
             with contextlib.suppress(Exception):   # nothing to cancel on a scheduler gone
                 client.cancel(futures)

@@ -484,24 +484,32 @@ def test_ctrl_c_while_the_dask_cluster_starts_stops_the_run(tmp_path):
 
 
 @contextlib.contextmanager
-def _external_cluster(tmp_path, *scheduler_args, workers: int = 1):
+def _external_cluster(tmp_path, *scheduler_args, workers: int = 1, without_fusionkit: str = ""):
     """A scheduler and a worker on loopback, started as a user starts them; yields the
-    scheduler's port and process. Both are stopped by their handles at the end."""
+    scheduler's port and process. Both are stopped by their handles at the end.
+    ``without_fusionkit`` ("worker" or "scheduler"): that one cannot import fusionkit."""
     import os
     import subprocess
     from pathlib import Path
 
     port = _free_port()
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).parent))   # the tasks of this file
+    if without_fusionkit:
+        (tmp_path / "absent" / "fusionkit").mkdir(parents=True)
+        (tmp_path / "absent" / "fusionkit" / "__init__.py").write_text(
+            "raise ModuleNotFoundError(\"No module named 'fusionkit'\", name='fusionkit')\n")
+    bare = dict(env, PYTHONPATH=os.pathsep.join([str(tmp_path / "absent"), env["PYTHONPATH"]]))
     scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
                                   "127.0.0.1", "--port", str(port), *scheduler_args],
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path, env=env)
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path,
+                                 env=bare if without_fusionkit == "scheduler" else env)
     procs = [scheduler]
     try:
         procs.append(subprocess.Popen(
             [sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
              "--host", "127.0.0.1", "--nworkers", str(workers), "--nthreads", "1", "--no-dashboard"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path, env=env))
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path,
+            env=bare if without_fusionkit == "worker" else env))
         yield port, scheduler
     finally:
         for p in procs:
@@ -527,6 +535,26 @@ def test_a_scheduler_without_dashboard_pages_is_said_to_have_none(tmp_path, page
             try:
                 assert ex.dashboard is None
                 assert ex.describe().endswith("dashboard: none (install bokeh for one)")
+            finally:
+                ex.close()
+
+
+@pytest.mark.parametrize("where", ["worker", "scheduler"])
+def test_a_cluster_without_fusionkit_is_one_clear_error(tmp_path, where):
+    """A cluster whose workers lack fusionkit (its README says they need it) ended the command
+    with a 70-line traceback ending in ModuleNotFoundError; a scheduler without it, with
+    "Error during deserialization of the task graph"."""
+    with _external_cluster(tmp_path, "--no-dashboard", without_fusionkit=where) as (port, _):
+        said = rf"^the Dask {where}s? at tcp://127.0.0.1:{port} cannot import fusionkit.*; install the same"
+        with deadline(120):
+            if where == "worker":   # said when the cluster is reached, before any task
+                with pytest.raises(InputError, match=said):
+                    DaskExecutor(address=f"tcp://127.0.0.1:{port}", timeout=60)
+                return
+            ex = DaskExecutor(address=f"tcp://127.0.0.1:{port}", timeout=60)
+            try:
+                with pytest.raises(InputError, match=said):
+                    ex.map(_pid_then_wait, [0.0, 0.0])
             finally:
                 ex.close()
 
