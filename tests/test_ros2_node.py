@@ -503,9 +503,13 @@ def test_a_reference_robot_whose_map_has_not_come_is_not_said_placed(procs, run3
                      and s["robots"]["/robot_2"]["map"]), None)
 
     status = _wait(both, 90, procs, "a status naming both robots")
+    time.sleep(1.0)   # a transform of robot_1 would have reached the probe by now
     assert procs.stop("pub") == 0 and procs.stop("node") == 0
     r1 = status["robots"]["/robot_1"]
     assert r1["placed"] is False and r1["map"] is None
+    # nor given a confidence or a transform (its identity pose was latched at subscription)
+    assert r1["confidence"] is None and r1["transform"] is None, r1
+    assert [p for p in _records(probe_out, "pose") if p["robot"] == "robot_1"] == []
     if sent == "none":
         assert r1["reason"] == "no valid map received yet" and r1["problem"] is None
     else:

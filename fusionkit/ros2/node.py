@@ -221,8 +221,6 @@ class MergeNode:
                                               latched_qos())
         role = " (reference: its map frame is the merged frame)" if name == self.reference else ""
         self.log.info(f"{name}: subscribed to {topic}{role}")
-        if name in {self.reference} | set(self.s.init_poses):
-            self._publish_pose(r)
 
     def _on_map(self, r: Robot, msg) -> None:
         try:
@@ -250,10 +248,11 @@ class MergeNode:
                 self.tracker.fix(r.name, _identity())
                 r.last_action = "reference"
                 self.log.info(f"{r.name}: reference robot (its map frame is the merged frame)")
-                self._publish_pose(r)
             r.problem = ""
             r.known, r.walls = known, walls
             r.grid = grid
+            if not r.pose_sent and self.tracker.held(r.name) is not None:   # the reference, or
+                self._publish_pose(r)   # a known initial pose: placed once its first map came
             r.received = time.monotonic()
             r.updates += 1
             self._map_version += 1
@@ -313,8 +312,8 @@ class MergeNode:
                                   else ""))
             robots[name] = {
                 "topic": r.topic, "placed": held is not None and not waiting,
-                "transform": None if held is None else held[0].as_dict(4),
-                "confidence": None if held is None else round(held[1], 4),
+                "transform": None if held is None or waiting else held[0].as_dict(4),
+                "confidence": None if held is None or waiting else round(held[1], 4),
                 "last_decision": r.last_action,
                 "reason": why,
                 "map": None if r.grid is None else {"width": r.grid.cols, "height": r.grid.rows,
