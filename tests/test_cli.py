@@ -357,6 +357,26 @@ def test_a_world_seed_given_with_a_world_map_is_refused(tmp_path, capsys):
     assert not (tmp_path / "r").exists()
 
 
+def test_far_more_workers_than_cores_and_a_lone_scheduler_timeout_are_refused(tmp_path, monkeypatch,
+                                                                            capsys):
+    """--workers 1000 (a typo for --cases 1000) started 1000 processes on 2 cores, and a SIGTERM
+    took minutes to end them; --scheduler-timeout without --scheduler was silently ignored."""
+    import os
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    for argv, said in (
+            (["bench", "--cases", "1", "--workers", "17", "--backend", "dask", "--out", "b"],
+             "--workers 17 would start 17 workers on this machine's 2 cores; give at most 16 (8 a "
+             "core), or --scheduler for a cluster"),
+            (["bench", "--cases", "1", "--jobs", "40", "--out", "b"], "--workers 40 would start"),
+            (["bench", "--cases", "1", "--scheduler-timeout", "5", "--out", "b"],
+             "--scheduler-timeout is how long to wait for --scheduler; give both, or neither")):
+        assert main(argv) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.startswith(f"fusionkit bench: error: {said}"), captured
+        assert captured.err.count("\n") == 1 and not (tmp_path / "b").exists()
+
+
 def test_bench_with_no_folder_says_only_the_error_of_a_bad_option(tmp_path, monkeypatch, capsys):
     """The line on the folders found came first, so the error was the second of two lines."""
     monkeypatch.chdir(tmp_path)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 from ._common import float_range, int_range
 
 
@@ -23,8 +25,9 @@ def add_executor_options(p, *, what: str) -> None:
     g.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                    help=f"run the {what} on the Dask cluster whose scheduler is at this address "
                         f"(its workers need fusionkit installed)")
-    g.add_argument("--scheduler-timeout", type=float_range(0, 3600, lo_open=True), default=10.0,
-                   metavar="S", help="seconds to wait for the scheduler to answer (default 10)")
+    g.add_argument("--scheduler-timeout", type=float_range(0, 3600, lo_open=True), default=None,
+                   metavar="S", help="with --scheduler: seconds to wait for the scheduler to "
+                                     "answer (default 10)")
 
 
 def executor_from_args(args, *, jobs: int | None = None):
@@ -38,5 +41,15 @@ def executor_from_args(args, *, jobs: int | None = None):
         workers = jobs
     if args.scheduler is not None and workers is not None:
         raise InputError("--scheduler uses the cluster's workers; drop --workers (or --jobs)")
+    if args.scheduler is None and args.scheduler_timeout is not None:
+        raise InputError("--scheduler-timeout is how long to wait for --scheduler; give both, or "
+                         "neither")
+    cores = os.cpu_count() or 1
+    if workers is not None and workers > 8 * cores:
+        # a typo (--workers 1000 for --cases 1000) started 1000 processes here and took
+        # minutes to stop
+        raise InputError(f"--workers {workers} would start {workers} workers on this machine's "
+                         f"{cores} cores; give at most {8 * cores} (8 a core), or --scheduler for "
+                         f"a cluster")
     return make_executor(args.backend, workers=workers, scheduler=args.scheduler,
-                         timeout=args.scheduler_timeout)
+                         timeout=10.0 if args.scheduler_timeout is None else args.scheduler_timeout)
