@@ -380,8 +380,11 @@ def _probe(address: str, timeout: float) -> None:
                              f"configuration (distributed.comm.tls.ca-file, .client.cert, "
                              f".client.key)")
         # refused, reset, closed, UCX missing: Dask's comm errors are OSErrors or not
-        raise InputError(f"no Dask scheduler answered at {address} ({type(answer).__name__}); check "
-                         f"the address and that the scheduler is running")
+        why = ("the connection was refused: nothing listens on that port" if "refused" in
+               str(answer).lower() else str(answer).splitlines()[0][:120] if str(answer).strip()
+               else type(answer).__name__)
+        raise InputError(f"no Dask scheduler answered at {address} ({why}); check the address "
+                         f"and that the scheduler is running")
     if not isinstance(answer, dict) or "n_workers" not in answer:
         raise InputError(f"{address} answers, but not as a Dask scheduler; give the scheduler's "
                          f"address (tcp://HOST:8786 by default), not a worker's")
@@ -404,5 +407,7 @@ def _check_address(address) -> None:
         hint = " (http is the dashboard's; the scheduler's own port is 8786 by default)" \
             if parts.scheme in ("http", "https") else ""
         raise InputError(f"{fix}{hint}")
+    if port is None:
+        raise InputError(f"{fix} (the port is missing: the scheduler's is 8786 by default)")
     if not parts.hostname or port == 0 or parts.path not in ("", "/"):
         raise InputError(fix)

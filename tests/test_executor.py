@@ -353,7 +353,8 @@ def test_a_scheme_this_machine_cannot_speak_is_one_line_and_exit_2(tmp_path, cap
 
 
 @pytest.mark.parametrize("address", ["http://127.0.0.1:8787", "tcp://", "tcp://:8786",
-                                     "tcp://127.0.0.1:99999", "tcp://127.0.0.1:port"])
+                                     "tcp://127.0.0.1:99999", "tcp://127.0.0.1:port",
+                                     "tcp://127.0.0.1"])
 def test_a_scheduler_address_dask_cannot_use_is_one_line_and_exit_2(tmp_path, capsys, address):
     """The dashboard's http://HOST:8787, an easy slip, or tcp:// with no host gave two
     tracebacks and exit 1."""
