@@ -59,7 +59,7 @@ import numpy as np
 
 from ._atomic import _short, show
 from ._inputs import regular_file
-from .errors import InputError
+from .errors import InputError, ScanLogError
 from .scanlog import ScanLog
 from .transform import wrap_angle
 
@@ -337,6 +337,12 @@ def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
     except OSError as exc:
         raise InputError(f"{_short(path)}: cannot read the CARMEN log ({exc.strerror or exc})") from None
     if not scans:
+        unusable = skipped.get("malformed", 0) + skipped.get("truncated", 0)
+        if unusable:   # laser records there, none of them usable (a NaN pose in every one)
+            raise InputError(f"{path}: none of its {unusable} laser records is usable "
+                             f"({skipped.get('malformed', 0)} malformed: a field that is not a "
+                             f"number, a negative or NaN range or a non-finite pose; "
+                             f"{skipped.get('truncated', 0)} truncated); check the log")
         raise InputError(f"{path}: no FLASER or ROBOTLASER1 records in the log "
                          f"({records} lines read); is this a CARMEN laser log?")
 
@@ -394,7 +400,10 @@ def read_carmen(path, config: CarmenConfig = CarmenConfig()) -> CarmenLog:
         records=records, scans=len(scans), kind=kind,
         skipped=MappingProxyType(dict(sorted(skipped.items()))), out_of_order=out_of_order,
         no_return_value=sentinel, no_return_readings=int(no_return.sum()))
-    log = ScanLog(poses, ranges.astype(np.float32), amin, inc, range_max)
+    try:
+        log = ScanLog(poses, ranges.astype(np.float32), amin, inc, range_max)
+    except ScanLogError as exc:   # poses 1e308 m away: said of this log
+        raise InputError(f"{_short(path)}: {exc}") from None
     stamps.setflags(write=False)
     return CarmenLog(log, stamps, stats, str(path))
 

@@ -121,11 +121,22 @@ def test_malformed_values_are_counted(tmp_path):
     assert c.stats.skipped["malformed"] == 3
 
 
-@pytest.mark.parametrize("lines", [[], ["ODOM 0 0 0 0 0 0 1 h 1", "# only comments"],
-                                   ["FLASER 180 1 2"]])
-def test_nothing_usable_is_an_input_error(tmp_path, lines):
+@pytest.mark.parametrize("lines, said", [
+    ([], "no FLASER or ROBOTLASER1 records"),
+    (["ODOM 0 0 0 0 0 0 1 h 1", "# only comments"], "no FLASER or ROBOTLASER1 records"),
+    # laser records that are all unusable are said as such (it said there were none)
+    (["FLASER 180 1 2"], r"none of its 1 laser records is usable \(0 malformed.*; 1 truncated\)"),
+    ([flaser([2.0, 3.0], (float("nan"), 0, 0), i) for i in range(3)],
+     r"none of its 3 laser records is usable \(3 malformed: .*a non-finite pose; 0 truncated\)")])
+def test_nothing_usable_is_an_input_error(tmp_path, lines, said):
     p = write(tmp_path, lines)
-    with pytest.raises(InputError, match="no FLASER or ROBOTLASER1 records"):
+    with pytest.raises(InputError, match=said):
+        read_carmen(p)
+
+
+def test_poses_far_from_the_origin_are_said_of_the_log(tmp_path):
+    p = write(tmp_path, [flaser([2.0, 3.0], (1e308, 0, 0), i) for i in range(3)])
+    with pytest.raises(InputError, match=r"/log\.clf: poses lie more than 1e\+09 m from the origin"):
         read_carmen(p)
 
 
