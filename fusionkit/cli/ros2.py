@@ -57,7 +57,8 @@ def register(sub) -> None:
     pl.add_argument("--steps", type=int_range(1, 10_000), default=10, metavar="N",
                     help="map updates per robot (default: %(default)s)")
     pl.add_argument("--topic", default="map", metavar="NAME",
-                    help="map topic in each robot's namespace (default: %(default)s)")
+                    help="map topic in each robot's namespace: /robot_1/NAME, also when NAME "
+                         "starts with / (default: %(default)s)")
     pl.add_argument("--hold", type=float_range(0.0, 86400.0), default=None, metavar="S",
                     help="seconds to keep publishing after the last step (default: until Ctrl-C)")
     pl.add_argument("--ros-args", nargs=argparse.REMAINDER, default=[], metavar="ARG",
