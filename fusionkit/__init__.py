@@ -90,5 +90,5 @@ def __getattr__(name):
 
 def __dir__():
     # the public names and the modules loaded so far, not this module's own helpers
-    return sorted(name for name in set(globals()) | set(_EXPORTS)
-                  if not name.startswith("_") and name != "annotations" or name in ("__version__", "__doc__"))
+    public = {n for n in set(globals()) | set(_EXPORTS) if not n.startswith("_")} - {"annotations"}
+    return sorted(public | {"__version__", "__doc__"})
