@@ -420,6 +420,7 @@ async def test_no_swarm_iterations_is_said_in_words_not_shown_as_an_empty_chart(
         assert not screen.run_panel.plot.display
         said = str(screen.run_panel.query_one("#no-swarm").render())
         assert "0 PSO iterations" in said and screen.run_panel.query_one("#no-swarm").display
+        assert screen.run_panel.plot.series == []     # nor a legend of lines never drawn
         await run_merge(pilot, FAST)                       # and the chart is back with them
         assert screen.run_panel.plot.display and screen.run_panel.plot.series
         assert not screen.run_panel.query_one("#no-swarm").display

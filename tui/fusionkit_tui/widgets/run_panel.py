@@ -222,7 +222,7 @@ class RunPanel(Vertical):
         if ev.stage == "align":
             colour = robot_colour(ev.pair[1]) if ev.pair else None
             if self._stage != "align" or ev.step != self._step:
-                if self._swarm:   # a swarm to plot: only the paper's method
+                if self._swarm and self.plot.display:   # a swarm to plot: the paper's method's
                     self.plot.start(ev.label, colour)
                     self._legend()
                 self._step, self._phase, self._last_iteration = ev.step, 0, -1
