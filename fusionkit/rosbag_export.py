@@ -25,8 +25,8 @@ from typing import Callable
 
 import numpy as np
 
-from ._atomic import check_writable
-from ._guards import _write_error, dead_export
+from ._atomic import check_writable, recover_folder
+from ._guards import _write_error
 from .errors import InputError
 from .scanlog import ScanLog, load_scans
 
@@ -274,7 +274,7 @@ def export_rosbag(run_dir, out=None, *, fmt: str = "ros2", storage: str = "sqlit
                          f"(2147483648), the latest time a ROS message holds; give a higher rate or "
                          f"an earlier start")
 
-    _sweep_dead_exports(parent)
+    recover_folder(parent)   # what killed writes left there: a killed export's folder too
     try:
         tmpdir = Path(tempfile.mkdtemp(prefix=f".{out.name}.{os.getpid()}.", suffix=".tmp",
                                        dir=parent))
@@ -314,17 +314,6 @@ def _flush(bag: Path) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
-
-
-def _sweep_dead_exports(parent: Path) -> None:
-    """Remove the temporary folders of exports into ``parent`` whose process is gone (killed)."""
-    try:
-        entries = os.listdir(parent)
-    except OSError:
-        return
-    for entry in entries:
-        if dead_export(parent, entry):
-            shutil.rmtree(parent / entry, ignore_errors=True)
 
 
 def _stamp_ns(start_s: float, rate: float, i: int) -> int:
