@@ -127,6 +127,20 @@ def test_a_folder_without_a_usable_map_is_refused(tmp_path, capsys):
         find_worlds([tmp_path / "nowhere"])
 
 
+def test_a_map_with_few_walls_is_left_out_with_a_hint_at_grey_walls(tmp_path):
+    """A real map whose walls are drawn in grey (willow_garage) was said to have "only 544
+    occupied cells" without a word of why a map of a whole office has so few."""
+    data = np.zeros((200, 200), np.int8)
+    data[::40, :] = 100                                   # 1000 wall cells: usable
+    save_map(OccupancyGrid(data, 0.05), tmp_path / "ok.yaml")
+    data[::40, 100:] = 0                                  # 500: too few
+    save_map(OccupancyGrid(data, 0.05), tmp_path / "grey.yaml")
+    worlds, skipped = find_worlds([tmp_path])
+    assert [w.name for w in worlds] == ["ok"]
+    assert skipped == [("grey", "only 500 occupied cells, needs 1000; walls drawn in grey may fall "
+                                "short of the map's occupied_thresh")]
+
+
 def test_bad_settings_are_refused():
     with pytest.raises(InputError, match="unknown method"):
         BenchConfig(methods=("magic",))

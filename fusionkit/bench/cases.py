@@ -101,7 +101,8 @@ def _usable(g: OccupancyGrid) -> str:
     """Why a world cannot be used ("" when it can)."""
     occ = int(g.occupied_mask().sum())
     if occ < MIN_WORLD_OCCUPIED:
-        return f"only {occ} occupied cell{'' if occ == 1 else 's'}, needs {MIN_WORLD_OCCUPIED}"
+        return (f"only {occ} occupied cell{'' if occ == 1 else 's'}, needs {MIN_WORLD_OCCUPIED}"
+                f"; walls drawn in grey may fall short of the map's occupied_thresh")
     if int(g.free_mask().sum()) < 20 * MIN_WORLD_OCCUPIED:
         return "too little free space"
     r, c = np.nonzero(g.known_mask())
