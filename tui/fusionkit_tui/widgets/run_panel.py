@@ -188,12 +188,15 @@ class RunPanel(Vertical):
         self._iterations = iterations
         self._stage, self._step, self._where = "", -1, (0, 0)
         self._stage_list = stages_of(method)
-        swarm = method == "spectral-pso" and iterations > 0
-        self.plot.reset("" if swarm else
-                        f"{method}: no swarm to watch (the paper's method, spectral-pso, has one)"
-                        if method != "spectral-pso" else
-                        "spectral-pso with 0 PSO iterations (Settings): its swarms do not move, "
-                        "so there is no convergence to watch")
+        if method != "spectral-pso":
+            why_none = f"{method}: no swarm to watch (the paper's method, spectral-pso, has one)"
+        elif not iterations:
+            why_none = ("spectral-pso with 0 PSO iterations (Settings): its swarms do not move, so "
+                        "there is no convergence to watch")
+        else:
+            why_none = ""
+        swarm = not why_none
+        self.plot.reset(why_none)
         self.plot.display = swarm
         note = self.query_one("#no-swarm", Static)
         note.update(self.plot.note)
@@ -222,7 +225,7 @@ class RunPanel(Vertical):
         if ev.stage == "align":
             colour = robot_colour(ev.pair[1]) if ev.pair else None
             if self._stage != "align" or ev.step != self._step:
-                if self._swarm and self.plot.display:   # a swarm to plot: the paper's method's
+                if self.plot.display:   # a swarm to plot: the paper's method's, with iterations
                     self.plot.start(ev.label, colour)
                     self._legend()
                 self._step, self._phase, self._last_iteration = ev.step, 0, -1
