@@ -5,10 +5,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import functools
 import logging
 import re
 import signal
+import socket
 import threading
+import time
+from urllib.parse import urlsplit
 
 from .errors import InputError
 from ._executor_base import Executor, worker_setup
@@ -146,6 +150,13 @@ class DaskExecutor(Executor):
                 raise InputError(f"the Dask workers at {address} cannot import fusionkit "
                                  f"({failed[0]}); install the same fusionkit (with its "
                                  f"dependencies) on every worker") from None
+            other = _differences(self._client.run(_installed).values())
+            if other:
+                self.close()
+                raise InputError(f"the Dask workers at {address} run {other}; install this "
+                                 f"fusionkit and the versions of its constraints.txt on every "
+                                 f"worker (the same seed gives the same result only on the "
+                                 f"same code)") from None
             self.workers = max(1, sum(w.get("nthreads", 1) for w in
                                       self._client.scheduler_info().get("workers", {}).values()))
             self._dashboard = True
@@ -331,6 +342,42 @@ class DaskExecutor(Executor):
             log.setLevel(level)
 
 
+#: the libraries whose versions change a merge's numbers
+_RESULT_LIBRARIES = ("numpy", "scipy", "cv2", "numba")
+
+
+@functools.cache
+def _installed() -> tuple:
+    """What a run's results depend on, as this process has it: a digest of fusionkit's own
+    code (a worker may hold another checkout of the same version) and the libraries' versions.
+    Run on each worker of a cluster given by its address, and here."""
+    import hashlib
+    import importlib
+    from pathlib import Path
+
+    root = Path(__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
+    return (("fusionkit", digest.hexdigest()[:12]),
+            *((name, importlib.import_module(name).__version__) for name in _RESULT_LIBRARIES))
+
+
+def _differences(theirs) -> str:
+    """What the workers' ``_installed()`` answers differ in from this process's, in words
+    ('' when none does)."""
+    mine = dict(_installed())
+    said = []
+    for answer in theirs:
+        for name, version in answer:
+            if version != mine.get(name):
+                text = ("another fusionkit (its code differs from this one's)" if name == "fusionkit"
+                        else f"{'opencv' if name == 'cv2' else name} {version} (here {mine.get(name)})")
+                if text not in said:
+                    said.append(text)
+    return ", ".join(said)
+
+
 #: The schemes a Dask scheduler listens on (tls:// and wss:// with the certificates of Dask's
 #: configuration, ``distributed.comm.tls``; ucx:// with UCX installed)
 _SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
@@ -347,9 +394,29 @@ def _probe(address: str, timeout: float) -> None:
     from distributed.comm import connect
     from distributed.security import Security
 
+    # tls:// and wss:// take their certificates from Dask's configuration, as Client does
+    security = Security().get_connection_args("client")
+    if address.startswith(("tls", "wss")) and security.get("ssl_context") is None:
+        raise InputError(f"{address}: a TLS scheduler needs the client's certificates in Dask's "
+                         f"configuration (distributed.comm.tls.ca-file, .client.cert, "
+                         f".client.key)")
+
     async def ask():
-        # tls:// and wss:// take their certificates from Dask's configuration, as Client does
-        comm = await connect(address, timeout=timeout, **Security().get_connection_args("client"))
+        # a plain TCP connection first (ucx:// is not TCP), tried again while it is refused (a
+        # scheduler still starting): Dask's connect said of a refused one only that it had
+        # timed out
+        if not address.startswith("ucx"):
+            parts = urlsplit(address)
+            while True:
+                try:
+                    _, writer = await asyncio.open_connection(parts.hostname, parts.port)
+                    break
+                except ConnectionRefusedError:
+                    if time.monotonic() > given_up:
+                        raise
+                    await asyncio.sleep(0.2)
+            writer.close()
+        comm = await connect(address, timeout=timeout, **security)
         try:
             await comm.write({"op": "identity", "n_workers": 0, "reply": True})
             return await comm.read()
@@ -364,6 +431,7 @@ def _probe(address: str, timeout: float) -> None:
         except BaseException as exc:   # noqa: BLE001 - handed to the caller
             answers.put((False, exc))
 
+    given_up = time.monotonic() + timeout - 0.5
     threading.Thread(target=run, name="fusionkit-dask-probe", daemon=True).start()
     late = (f"the Dask scheduler at {address} did not answer within {timeout:g} s; check the "
             f"address (the scheduler's port, 8786 by default, not the dashboard's), that the "
@@ -375,13 +443,12 @@ def _probe(address: str, timeout: float) -> None:
     if not ok:
         if isinstance(answer, (TimeoutError, asyncio.TimeoutError)):
             raise InputError(late)
-        if isinstance(answer, TypeError) and address.startswith(("tls", "wss")):
-            raise InputError(f"{address}: a TLS scheduler needs the client's certificates in Dask's "
-                             f"configuration (distributed.comm.tls.ca-file, .client.cert, "
-                             f".client.key)")
         # refused, reset, closed, UCX missing: Dask's comm errors are OSErrors or not
-        why = ("the connection was refused: nothing listens on that port" if "refused" in
-               str(answer).lower() else str(answer).splitlines()[0][:120] if str(answer).strip()
+        why = (f"the connection was refused for {timeout:g} s: nothing listens on that port"
+               if isinstance(answer, ConnectionRefusedError) or "refused" in str(answer).lower()
+               else f"no host is named {urlsplit(address).hostname!r}"
+               if isinstance(answer, socket.gaierror)
+               else str(answer).splitlines()[0][:120] if str(answer).strip()
                else type(answer).__name__)
         raise InputError(f"no Dask scheduler answered at {address} ({why}); check the address "
                          f"and that the scheduler is running")
@@ -393,8 +460,6 @@ def _probe(address: str, timeout: float) -> None:
 def _check_address(address) -> None:
     """Refuse a scheduler address Dask cannot connect to (the dashboard's ``http://HOST:8787``,
     no host, a port out of range) with one line that says how to give it."""
-    from urllib.parse import urlsplit
-
     fix = f"scheduler address {address!r}: give it as tcp://HOST:PORT"
     if not isinstance(address, str) or "://" not in address:
         raise InputError(fix)

@@ -337,6 +337,21 @@ def test_ctrl_c_while_a_silent_scheduler_is_asked_ends_at_once(tmp_path):
         "fusionkit bench: interrupted; no output was left half-written"]
 
 
+@pytest.mark.parametrize("host, said", [("127.0.0.1", "the connection was refused for 5 s: nothing listens"),
+                                         ("nosuchhost.invalid", "no host is named 'nosuchhost.invalid'")])
+def test_a_refused_connection_or_an_unknown_host_is_said_as_such(tmp_path, capsys, host, said):
+    """Dask's client retries a refused connection until the timeout (a scheduler may be
+    starting), then said only that it had timed out; the port is free, the host's name cannot
+    exist (.invalid)."""
+    address = f"tcp://{host}:{_free_port()}"
+    with deadline(60):
+        code = main(["bench", "--worlds", "cave", "--cases", "1", "--out", str(tmp_path / "b"),
+                     "--scheduler", address, "--scheduler-timeout", "5"])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"no Dask scheduler answered at {address} ({said}" in err[0], err
+
+
 @pytest.mark.parametrize("scheme", ["tls", "ucx"])
 def test_a_scheme_this_machine_cannot_speak_is_one_line_and_exit_2(tmp_path, capsys, scheme):
     """tls:// without certificates in Dask's configuration, ucx:// without UCX: a traceback of
@@ -488,17 +503,26 @@ def test_ctrl_c_while_the_dask_cluster_starts_stops_the_run(tmp_path):
 def _external_cluster(tmp_path, *scheduler_args, workers: int = 1, without_fusionkit: str = ""):
     """A scheduler and a worker on loopback, started as a user starts them; yields the
     scheduler's port and process. Both are stopped by their handles at the end.
-    ``without_fusionkit`` ("worker" or "scheduler"): that one cannot import fusionkit."""
+    ``without_fusionkit`` ("worker" or "scheduler"): that one cannot import fusionkit;
+    "other": the worker imports another copy of fusionkit, one line of its code changed."""
     import os
     import subprocess
     from pathlib import Path
 
     port = _free_port()
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).parent))   # the tasks of this file
-    if without_fusionkit:
+    if without_fusionkit in ("worker", "scheduler"):
         (tmp_path / "absent" / "fusionkit").mkdir(parents=True)
         (tmp_path / "absent" / "fusionkit" / "__init__.py").write_text(
             "raise ModuleNotFoundError(\"No module named 'fusionkit'\", name='fusionkit')\n")
+    if without_fusionkit == "other":
+        import shutil
+        import fusionkit
+        copy = tmp_path / "absent" / "fusionkit"
+        shutil.copytree(Path(fusionkit.__file__).parent, copy,
+                        ignore=shutil.ignore_patterns("__pycache__"))
+        with open(copy / "transform.py", "a") as f:
+            f.write("\n# another checkout\n")
     bare = dict(env, PYTHONPATH=os.pathsep.join([str(tmp_path / "absent"), env["PYTHONPATH"]]))
     scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
                                   "127.0.0.1", "--port", str(port), *scheduler_args],
@@ -510,7 +534,7 @@ def _external_cluster(tmp_path, *scheduler_args, workers: int = 1, without_fusio
             [sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
              "--host", "127.0.0.1", "--nworkers", str(workers), "--nthreads", "1", "--no-dashboard"],
             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=tmp_path,
-            env=bare if without_fusionkit == "worker" else env))
+            env=bare if without_fusionkit in ("worker", "other") else env))
         yield port, scheduler
     finally:
         for p in procs:
@@ -558,6 +582,16 @@ def test_a_cluster_without_fusionkit_is_one_clear_error(tmp_path, where):
                     ex.map(_pid_then_wait, [0.0, 0.0])
             finally:
                 ex.close()
+
+
+def test_workers_running_other_code_are_refused_before_any_task(tmp_path):
+    """A worker with another checkout of fusionkit (or other numpy, OpenCV, numba) ran the
+    tasks: its results could differ from a run here for the same seed, without a word."""
+    with _external_cluster(tmp_path, "--no-dashboard", without_fusionkit="other") as (port, _):
+        with deadline(120):
+            with pytest.raises(InputError, match=rf"^the Dask workers at tcp://127.0.0.1:{port} "
+                                                 r"run another fusionkit \(its code differs"):
+                DaskExecutor(address=f"tcp://127.0.0.1:{port}", timeout=60)
 
 
 def test_a_scheduler_lost_mid_run_is_one_clear_error_and_a_prompt_close(tmp_path, capfd):
