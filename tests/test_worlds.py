@@ -108,6 +108,10 @@ def test_world_writer_command(tmp_path, capsys):
     (lambda: make_office(0, size=(8, 8)), "at least"),
     (lambda: make_cave(0, resolution=0.0), "resolution"),
     (lambda: make_warehouse(-1), "seed"),
+    (lambda: make_world("office", 2.7), "world seed must be a whole number"),   # was taken as 2
+    (lambda: make_world("cave", "1"), "world seed must be a whole number"),
+    (lambda: make_world("cave", True), "world seed must be a whole number"),
+    (lambda: make_world("cave", None), "world seed must be a whole number"),
     (lambda: make_office(0, size=(1e5, 1e5)), "cells"),
 ])
 def test_bad_world_requests(call, words):

@@ -122,13 +122,13 @@ def _check(kind: str, size, resolution) -> tuple[tuple[float, float], float]:
 def _rng(seed) -> np.random.Generator:
     if isinstance(seed, np.random.Generator):
         return seed
-    try:
-        seed = int(seed)
-    except (TypeError, ValueError):
-        raise InputError(f"world seed must be a whole number, got {seed!r}") from None
+    # 2.7 was taken as 2 and "1" as 1: a seed is a whole number, as the simulation's is
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise InputError(f"world seed must be a whole number >= 0 or a numpy Generator, "
+                         f"got {seed!r}")
     if seed < 0:
         raise InputError(f"world seed must be >= 0, got {seed}")
-    return np.random.default_rng(seed)
+    return np.random.default_rng(int(seed))
 
 
 def _split(rng, length: float, lo: float, hi: float) -> list[float]:
