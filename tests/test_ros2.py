@@ -12,7 +12,7 @@ import fusionkit as fk
 # the module path: once imported, the submodule shadows the lazy name fk.simulate
 from fusionkit.simulate import SimulationConfig, simulate, write_run
 from fusionkit.ros2._convert import BadMap, fill_msg, grid_from_msg
-from fusionkit.ros2._names import is_robot_map_topic, parent_namespace
+from fusionkit.ros2._names import is_robot_map_topic, robot_of
 from fusionkit.ros2._params import settings_from
 from fusionkit.ros2._tracker import Tracker
 from fusionkit.ros2.play import find_robots, growth_steps
@@ -160,7 +160,13 @@ def test_robot_map_topics_are_found_as_map_merge_finds_them():
     kw = dict(robot_map_topic="map", robot_namespace="", merged_topic="/map")
     grid = ["nav_msgs/msg/OccupancyGrid"]
     assert is_robot_map_topic("/robot1/map", grid, **kw)
-    assert parent_namespace("/robot1/map") == "/robot1"
+    assert robot_of("/robot1/map", "map") == "/robot1" and robot_of("/map", "map") == "/"
+    # a map topic of two levels (map_merge matched no topic then)
+    nested = {**kw, "robot_map_topic": "slam/map"}
+    assert is_robot_map_topic("/robot1/slam/map", grid, **nested)
+    assert robot_of("/robot1/slam/map", "slam/map") == "/robot1"
+    assert not is_robot_map_topic("/robot1/map", grid, **nested)
+    assert not is_robot_map_topic("/robot1/myslam/map", grid, **nested)
     assert not is_robot_map_topic("/map", grid, **kw)                      # our own output
     assert not is_robot_map_topic("/robot1/map", ["std_msgs/msg/String"], **kw)
     assert not is_robot_map_topic("/robot1/map_updates", grid, **kw)

@@ -597,3 +597,16 @@ def test_a_merged_map_topic_a_robot_publishes_on_is_said(procs, run3):
     assert procs.stop("pub") == 0 and procs.stop("node") == 0
     log = procs.log("node")
     assert log.count(said) == 1 and "choose another merged_map_topic" in log and "Traceback" not in log
+
+
+def test_a_robot_map_topic_of_two_levels_finds_its_robots(procs, run3):
+    """robot_map_topic:=slam/map found no robot (the robot was taken as the topic's parent,
+    /robot_1/slam, whose slam/map is not the topic): nothing was ever merged, without a word."""
+    procs.start("play", FUSIONKIT + ["ros2", "play", str(run3), "--duration", "0", "--steps", "1",
+                                     "--hold", "60", "--topic", "slam/map"])
+    _wait(lambda: "last maps published" in procs.log("play"), 60, procs, "the maps to be published")
+    procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
+                                      "-p", "robot_map_topic:=slam/map"])
+    _wait(lambda: all(f"/robot_{k}: subscribed to /robot_{k}/slam/map" in procs.log("node")
+                      for k in (1, 2, 3)), 60, procs, "the three robots to be found")
+    assert procs.stop("node") == 0 and procs.stop("play") == 0

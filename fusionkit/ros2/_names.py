@@ -2,23 +2,20 @@
 
 from __future__ import annotations
 
-__all__ = ["parent_namespace", "append", "is_robot_map_topic", "robot_slug", "MAP_TYPE",
-           "check_topic"]
+__all__ = ["robot_of", "is_robot_map_topic", "robot_slug", "MAP_TYPE", "check_topic"]
 
 #: The one message type read as a robot map.
 MAP_TYPE = "nav_msgs/msg/OccupancyGrid"
 
 
-def parent_namespace(name: str) -> str:
-    """``"/robot1/map"`` -> ``"/robot1"``; ``"/map"`` -> ``"/"``."""
-    head = name.rstrip("/").rsplit("/", 1)[0]
-    return head or "/"
-
-
-def append(ns: str, name: str) -> str:
-    """``ns`` joined with a relative ``name`` (``"/robot1"``, ``"map"`` -> ``"/robot1/map"``)."""
-    name = name.strip("/")
-    return ns + name if ns.endswith("/") else f"{ns}/{name}"
+def robot_of(topic: str, robot_map_topic: str) -> str | None:
+    """The robot whose map ``topic`` is, ``<robot>/<robot_map_topic>``, or None
+    (``"/robot1/slam/map"``, ``"slam/map"`` -> ``"/robot1"``; map_merge takes the topic's parent
+    namespace, so that a robot_map_topic of two levels matched no topic)."""
+    suffix = "/" + robot_map_topic.strip("/")
+    if not topic.endswith(suffix):
+        return None
+    return topic[:-len(suffix)] or "/"
 
 
 def is_robot_map_topic(topic: str, types, *, robot_map_topic: str, robot_namespace: str,
@@ -26,7 +23,7 @@ def is_robot_map_topic(topic: str, types, *, robot_map_topic: str, robot_namespa
     """Whether ``topic`` is a robot's map: ``<namespace>/<robot_map_topic>`` of type
     OccupancyGrid, containing ``robot_namespace``, and not the merged map itself."""
     return (MAP_TYPE in types and topic != merged_topic and robot_namespace in topic
-            and append(parent_namespace(topic), robot_map_topic) == topic)
+            and robot_of(topic, robot_map_topic) is not None)
 
 
 def robot_slug(robot: str) -> str:

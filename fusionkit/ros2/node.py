@@ -22,7 +22,7 @@ import time
 
 from .. import FusionkitError, MergeCancelled
 from ._convert import BadMap, fill_msg, fill_pose, grid_from_msg
-from ._names import is_robot_map_topic, parent_namespace, robot_slug
+from ._names import is_robot_map_topic, robot_of, robot_slug
 from ._params import INIT_POSE, PARAMETERS, NodeSettings, settings_from, unknown_parameter
 from ._robots import Robot, estimate_round
 from ._tracker import Tracker
@@ -172,7 +172,7 @@ class MergeNode:
                                       robot_namespace=s.robot_namespace,
                                       merged_topic=self.merged_topic):
                 continue
-            name = parent_namespace(topic)
+            name = robot_of(topic, s.robot_map_topic)
             seen.add(name)
             if name in self.robots:
                 continue
