@@ -180,7 +180,9 @@ def encode_scans(log: ScanLog) -> bytes:
 def save_scans(path, log: ScanLog) -> None:
     """Write ``log`` to ``path`` (``.scans.npz``) atomically, in the CONTRACTS section 3 layout."""
     if not isinstance(log, ScanLog):
-        raise ScanLogError(f"save_scans(path, log) writes a ScanLog, got {type(log).__name__}")
+        swapped = (" (the path comes first here, unlike save_map(grid, path))"
+                   if isinstance(path, ScanLog) else "")
+        raise ScanLogError(f"save_scans(path, log) writes a ScanLog, got {type(log).__name__}{swapped}")
     write_bytes_atomic(path_arg(path, "the scan log's path"), encode_scans(log))
 
 

@@ -590,7 +590,7 @@ def test_what_is_not_a_path_or_a_grid_is_one_clear_error(tmp_path):
     """None, a number or a grid given as a path, and save_map's arguments swapped, raised
     pathlib's TypeError naming no argument."""
     from fusionkit.errors import ScanLogError
-    from fusionkit.scanlog import load_scans, save_scans, scans_path_for
+    from fusionkit.scanlog import ScanLog, load_scans, save_scans, scans_path_for
     grid = _grid()
     for call, said in ((lambda: load_map(None), "the map's YAML must be a path"),
                        (lambda: load_map(grid), "got OccupancyGrid"),
@@ -604,4 +604,7 @@ def test_what_is_not_a_path_or_a_grid_is_one_clear_error(tmp_path):
         load_scans(None)
     with pytest.raises(ScanLogError, match="writes a ScanLog, got ndarray"):
         save_scans(tmp_path / "s.scans.npz", np.zeros(3))
+    log = ScanLog(np.zeros((1, 3)), np.ones((1, 4)), 0.0, 0.5, 10.0)
+    with pytest.raises(ScanLogError, match=r"got str \(the path comes first here, unlike save_map"):
+        save_scans(log, str(tmp_path / "s.scans.npz"))   # in save_map's order
     assert list(tmp_path.iterdir()) == []
