@@ -135,6 +135,28 @@ def test_the_same_pair_at_two_resolutions_gets_the_same_decision(intel_crop):
     assert not estimate_pair(_finer(a), _finer(b)).accepted
 
 
+def _padded(grid: OccupancyGrid, cells: int) -> OccupancyGrid:
+    """The same map in the same frame, with ``cells`` unknown cells around it."""
+    x, y, yaw = grid.origin
+    c, s = math.cos(yaw), math.sin(yaw)
+    d = cells * grid.resolution
+    return OccupancyGrid(np.pad(grid.data, cells, constant_values=UNKNOWN), grid.resolution,
+                         (x - c * d + s * d, y - s * d - c * d, yaw))
+
+
+def test_an_unknown_margin_around_a_map_does_not_change_the_decision(intel_crop):
+    """The reference saved with 2000 unknown cells on every side (as map_saver writes a
+    4000 x 4000 grid) was searched on a raster so coarse that its pair was refused as
+    contradicted, though no known cell differs."""
+    plain = estimate_pair(intel_crop.a, intel_crop.b)
+    padded = _padded(intel_crop.a, 2000)
+    assert np.allclose(padded.cell_to_world(2000, 2000), intel_crop.a.cell_to_world(0, 0), atol=1e-9)
+    wide = estimate_pair(padded, intel_crop.b)
+    assert plain.accepted and wide.accepted, wide.diagnostics
+    assert right(wide.transform, intel_crop)
+    assert wide.transform.error_to(plain.transform)[0] < 0.1 * intel_crop.a.resolution
+
+
 @pytest.mark.parametrize("kind", ["no walls", "all unknown", "1x1"])
 def test_a_map_no_test_can_judge_is_refused_with_its_reason(intel_crop, kind):
     if kind == "no walls":

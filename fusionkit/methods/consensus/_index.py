@@ -229,6 +229,32 @@ def spread_indices(poses: np.ndarray, spacing: float, limit: int) -> np.ndarray:
     return idx
 
 
+#: Unknown cells kept around a map's known ones by :func:`_trimmed`: more than the widest gate
+#: of the refinement (8 cells), so that no wall a refinement or a check can reach is cut off
+TRIM_MARGIN = 10
+
+
+def _trimmed(grid: OccupancyGrid) -> OccupancyGrid:
+    """``grid`` cut to the bounding box of its known cells and :data:`TRIM_MARGIN` cells around
+    it, in the same frame (its origin moved with the cut); ``grid`` itself when nothing is cut.
+    A map saved with a wide unknown margin (map_saver's 4000 x 4000 cells) was searched on a
+    raster sized to the whole grid, so coarse that the true placement was missed: the decision
+    must not depend on how much unknown surrounds a map."""
+    known = grid.known_mask()
+    r = np.flatnonzero(known.any(axis=1))
+    c = np.flatnonzero(known.any(axis=0))
+    if r.size == 0:
+        return grid
+    r0, c0 = max(0, int(r[0]) - TRIM_MARGIN), max(0, int(c[0]) - TRIM_MARGIN)
+    r1 = min(grid.rows, int(r[-1]) + 1 + TRIM_MARGIN)
+    c1 = min(grid.cols, int(c[-1]) + 1 + TRIM_MARGIN)
+    if (r0, c0, r1, c1) == (0, 0, grid.rows, grid.cols):
+        return grid
+    x, y = grid.origin_transform(np.array([c0 * grid.resolution, r0 * grid.resolution]))
+    return OccupancyGrid(grid.data[r0:r1, c0:c1], grid.resolution,
+                         (float(x), float(y), grid.origin[2]), name=grid.name)
+
+
 def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_spacing: float,
               max_poses: int, max_refine_points: int, clear_cells: int = 3,
               cloud_spacing: float = 0.05) -> MapIndex:
@@ -252,7 +278,7 @@ def index_map(grid: OccupancyGrid, log: ScanLog | None, *, virtual: bool, pose_s
     cloud_spacing : float
         Side (m) of the squares the recorded scans' end points are thinned to.
     """
-    tri = grid.with_data(grid.trinary())
+    tri = _trimmed(grid.with_data(grid.trinary()))
     occupied = tri.occupied_mask()
     known = tri.known_mask()
     free = known & ~occupied
