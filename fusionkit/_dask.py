@@ -15,7 +15,7 @@ import time
 from urllib.parse import urlsplit
 
 from .errors import InputError
-from ._executor_base import Executor, worker_setup
+from ._executor_base import Executor, check_local_workers, worker_setup
 
 __all__ = ["DaskExecutor"]
 
@@ -161,9 +161,7 @@ class DaskExecutor(Executor):
                                       self._client.scheduler_info().get("workers", {}).values()))
             self._dashboard = True
         else:
-            if not isinstance(workers, int) or workers < 1:
-                raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
-            self.workers = workers
+            self.workers = check_local_workers(workers)
             if dashboard:
                 try:
                     import bokeh  # noqa: F401

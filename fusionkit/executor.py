@@ -34,7 +34,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, ThreadPoolE
 from typing import Iterator
 
 from . import _signals
-from ._executor_base import Executor, exit_with_parent, worker_setup
+from ._executor_base import Executor, check_local_workers, exit_with_parent, worker_setup
 from .errors import InputError
 
 __all__ = ["Executor", "InProcess", "LocalProcesses", "DaskExecutor", "make_executor", "using",
@@ -139,9 +139,7 @@ class LocalProcesses(Executor):
     name = "processes"
 
     def __init__(self, workers: int = 2):
-        if not isinstance(workers, int) or workers < 1:
-            raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
-        self.workers = workers
+        self.workers = check_local_workers(workers)
         self._token = 0
         self._pool = None
         self._pool_shared = None
@@ -251,6 +249,10 @@ def current_executor() -> Executor | None:
 @contextlib.contextmanager
 def using(executor: Executor | None) -> Iterator[Executor | None]:
     """Within this block, :func:`fusionkit.pipeline.merge` runs its pair stage on ``executor``."""
+    if executor is not None and not isinstance(executor, Executor):
+        # using("processes") failed deep in the merge: 'str' object has no attribute 'map'
+        raise InputError(f"using() takes an Executor or None, got {executor!r}; make one with "
+                         f"make_executor('processes', workers=2), for example")
     token = _CURRENT.set(executor)
     try:
         yield executor

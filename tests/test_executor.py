@@ -10,6 +10,7 @@ import io
 import signal
 import socket
 import sys
+import re
 import time
 
 import numpy as np
@@ -691,3 +692,22 @@ def test_a_worker_whose_parent_died_before_it_started_ends_at_once():
                             "exit_with_parent(os.getppid())\n"
                             "print('ran')\n"], timeout=50, capture_output=True, text=True)
     assert stays.returncode == 0 and stays.stdout == "ran\n"
+
+
+def test_far_more_workers_than_cores_or_a_using_of_no_executor_is_refused_from_python(monkeypatch):
+    """The command line refused --workers 1000 on 2 cores; make_executor("dask", workers=1000)
+    from Python started a process every 1.5 s, 550 of them in ten minutes. using("processes")
+    failed deep in the merge: 'str' object has no attribute 'map'."""
+    import os
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    said = ("workers=17 would start 17 workers on this machine's 2 cores; give at most 16 (8 a "
+            "core), or a scheduler's address for a cluster")
+    for make in (lambda: make_executor("dask", workers=17), lambda: DaskExecutor(17),
+                 lambda: make_executor("processes", workers=17), lambda: LocalProcesses(17)):
+        with pytest.raises(InputError, match=re.escape(said)):
+            make()
+    assert LocalProcesses(16).workers == 16
+    for wrong in ("processes", 4):
+        with pytest.raises(InputError, match=r"^using\(\) takes an Executor or None, got"):
+            with using(wrong):
+                pass

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import os
-
+from .._executor_base import check_local_workers
 from ._common import float_range, int_range
 
 
@@ -44,12 +43,7 @@ def executor_from_args(args, *, jobs: int | None = None):
     if args.scheduler is None and args.scheduler_timeout is not None:
         raise InputError("--scheduler-timeout is how long to wait for --scheduler; give both, or "
                          "neither")
-    cores = os.cpu_count() or 1
-    if workers is not None and workers > 8 * cores:
-        # a typo (--workers 1000 for --cases 1000) started 1000 processes here and took
-        # minutes to stop
-        raise InputError(f"--workers {workers} would start {workers} workers on this machine's "
-                         f"{cores} cores; give at most {8 * cores} (8 a core), or --scheduler for "
-                         f"a cluster")
+    if workers is not None:
+        check_local_workers(workers, f"--workers {workers}", "--scheduler")
     return make_executor(args.backend, workers=workers, scheduler=args.scheduler,
                          timeout=10.0 if args.scheduler_timeout is None else args.scheduler_timeout)
