@@ -31,6 +31,7 @@ from ._jit import pjit, prange
 from ._validate import number, whole
 from .errors import InputError
 from .grid import OccupancyGrid
+from .mapping import MAX_CELLS
 from .pso import PSOConfig, PSOResult, pso_minimize
 from .scanlog import ScanLog
 from .transform import Transform2D, wrap_angle
@@ -115,6 +116,12 @@ def make_field(points: np.ndarray, resolution: float, *, sigma: float = 1.0,
     y0 = math.floor((pts[:, 1].min() - margin) / resolution) * resolution
     cols = int(math.ceil((pts[:, 0].max() + margin - x0) / resolution)) + 1
     rows = int(math.ceil((pts[:, 1].max() + margin - y0) / resolution)) + 1
+    if rows * cols > MAX_CELLS:
+        # points in millimetres, or a resolution of 1e-5 m, asked numpy for terabytes
+        raise InputError(f"the mask's points span {cols * resolution:.6g} x {rows * resolution:.6g} m: "
+                         f"at {resolution:g} m cells, {cols} x {rows} cells, more than the "
+                         f"{MAX_CELLS} fusionkit can hold; give the points in metres and the "
+                         f"resolution in metres per cell")
     raster = np.zeros((rows, cols), np.float32)
     c = np.floor((pts[:, 0] - x0) / resolution).astype(np.int64)
     r = np.floor((pts[:, 1] - y0) / resolution).astype(np.int64)

@@ -43,6 +43,12 @@ def _check_cells(raw: np.ndarray) -> None:
     if lo < -1 or hi > 100:
         raise InputError(f"grid data holds values from {lo:g} to {hi:g}: give -1 unknown, 0 free to 100 "
                          f"occupied (an image's pixels are read as a map by load_map)")
+    if hi == 1 and raw.dtype != np.int8:
+        # a wall mask of 0 and 1 (mask.astype(np.uint8)) became a map with no wall: 1 is 1 %
+        # occupied; int8, a map's own type (read from a file or a ROS message), is taken as it is
+        raise InputError("grid data holds no value above 1, and 1 is a cell 1 % occupied (free): "
+                         "give -1 unknown, 0 free, 100 occupied (for a wall mask of 0 and 1, "
+                         "np.where(mask == 1, 100, 0))")
 
 
 @dataclass(frozen=True, eq=False)

@@ -103,8 +103,8 @@ def test_more_seeds_than_particles_fill_the_swarm_with_the_best():
 
 
 def test_bad_points_resolution_or_tolerance_are_one_clear_error():
-    """They raised IndexError, OverflowError or a numpy ValueError, or were taken silently: a
-    one-column moving mask was aligned, and a negative ``tolerance`` dilated ``a``'s walls until
+    """They raised IndexError, OverflowError, MemoryError or a numpy ValueError, or were taken
+    silently: a one-column moving mask was aligned, and a negative ``tolerance`` dilated ``a``'s walls until
     they filled the map (scipy's ``iterations < 1``), so every placement scored 1."""
     import pytest
 
@@ -115,7 +115,11 @@ def test_bad_points_resolution_or_tolerance_are_one_clear_error():
              ((pts, pts, float("nan")), "resolution must be a finite number"),
              ((pts[:, :1], pts, 0.1), r"reference must be an \(N, 2\) array.*shape \(\d+, 1\)"),
              ((pts, pts[:, :1], 0.1), r"moving must be an \(N, 2\) array"),
-             ((pts, np.full((3, 2), np.nan), 0.1), "moving holds NaN")]
+             ((pts, np.full((3, 2), np.nan), 0.1), "moving holds NaN"),
+             # points in millimetres, a resolution of 1e-5 m: numpy's MemoryError (terabytes)
+             ((pts * 1000, pts * 1000, 0.1),
+              r"cells, more than the 200000000 fusionkit can hold; give the points in metres"),
+             ((pts, pts, 1e-5), r"at 1e-05 m cells, \d+ x \d+ cells, more than")]
     for args, said in cases:
         with pytest.raises(InputError, match=said):
             align_points(*args, seed=0)

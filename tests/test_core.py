@@ -247,11 +247,15 @@ def test_a_transform_refuses_points_and_poses_of_the_wrong_shape():
 
 
 def test_a_grid_refuses_masks_and_out_of_range_int8_and_never_freezes_the_callers_array():
-    """A bool wall mask became all free; an int8 image's walls (0) became free and its other
-    pixels unknown (-56...); the caller's own array was made read-only, and a grid built from a
-    view changed when the array under it did."""
+    """A bool wall mask became all free, and so did one of 0 and 1; an int8 image's walls (0)
+    became free and its other pixels unknown (-56...); the caller's own array was made
+    read-only, and a grid built from a view changed when the array under it did."""
     with pytest.raises(InputError, match=r"boolean mask.*np.where\(mask, 100, 0\)"):
         OccupancyGrid(np.ones((3, 3), bool), 0.1)
+    for mask in (np.eye(3, dtype=np.uint8), np.eye(3), 2 * np.eye(3, dtype=np.int64) - 1):
+        with pytest.raises(InputError, match=r"no value above 1.*np.where\(mask == 1, 100, 0\)"):
+            OccupancyGrid(mask, 0.1)                     # walls as 1: a map with no wall
+    assert OccupancyGrid(np.eye(3, dtype=np.int8), 0.1).counts()["free"] == 9   # a map's own type
     with pytest.raises(InputError, match="values from -56 to 127"):
         OccupancyGrid(np.array([[127, -56]], np.int8), 0.1)
     mine = np.zeros((4, 4), np.int8)
