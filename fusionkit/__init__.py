@@ -58,7 +58,7 @@ import importlib as _importlib  # noqa: E402
 # Public names and the module that defines each. They are imported on first use, so that a
 # command or script pays only for the parts it touches (numba, scipy and OpenCV load slowly).
 _EXPORTS = {
-    **dict.fromkeys(['FusionkitError', 'InputError', 'MapFormatError', 'NotMergedError', 'ScanLogError'], "errors"),
+    **dict.fromkeys(['FusionkitError', 'InputError', 'MapFormatError', 'ScanLogError'], "errors"),
     **dict.fromkeys(['FREE', 'OCCUPIED', 'UNKNOWN', 'OccupancyGrid'], "grid"),
     **dict.fromkeys(['Transform2D'], "transform"),
     **dict.fromkeys(['ScanLog', 'load_scans', 'save_scans', 'scans_path_for'], "scanlog"),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -62,3 +63,11 @@ def own_array(array: np.ndarray, given) -> np.ndarray:
                 return array.copy()
             base = base.base
     return array
+
+
+def names(value) -> tuple:
+    """``value`` as a tuple of names: one string or path is one name (``"consensus"`` was
+    taken letter by letter, ``'c'`` then said to be no method)."""
+    if isinstance(value, (str, bytes, os.PathLike)):
+        return (value,)
+    return tuple(value)

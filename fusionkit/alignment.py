@@ -271,6 +271,12 @@ def align_points(reference: np.ndarray, moving: np.ndarray, resolution: float, *
                  callback=None) -> Alignment:
     """Align ``moving`` points (m) to ``reference`` points (m) by PSO on eq. 3.
 
+    The swarm searches the whole box of ``config`` from random starts: on whole maps' walls,
+    without ``seeds`` it often settles in a local minimum far from the truth and says nothing of
+    it (``success`` means only that the swarm stopped improving). Give it the hypotheses of the
+    paper's pairing as ``seeds`` (what the ``spectral-pso`` method does; notebook 04 shows
+    both), or use :func:`fusionkit.merge`, which also judges the placement it finds.
+
     Parameters
     ----------
     reference, moving : (K, 2), (L, 2) float

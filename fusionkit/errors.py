@@ -6,7 +6,7 @@ what to do about it; the command line prints that sentence alone (no traceback) 
 
 from __future__ import annotations
 
-__all__ = ["FusionkitError", "InputError", "MapFormatError", "ScanLogError", "NotMergedError"]
+__all__ = ["FusionkitError", "InputError", "MapFormatError", "ScanLogError"]
 
 
 class FusionkitError(Exception):
@@ -24,6 +24,3 @@ class MapFormatError(InputError):
 class ScanLogError(InputError):
     """A ``NAME.scans.npz`` scan log is missing keys, has inconsistent shapes or bad ranges."""
 
-
-class NotMergedError(FusionkitError):
-    """The maps could not be placed with confidence (for example, they do not overlap)."""

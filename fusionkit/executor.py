@@ -248,7 +248,9 @@ def current_executor() -> Executor | None:
 
 @contextlib.contextmanager
 def using(executor: Executor | None) -> Iterator[Executor | None]:
-    """Within this block, :func:`fusionkit.pipeline.merge` runs its pair stage on ``executor``."""
+    """Within this block, :func:`fusionkit.pipeline.merge` runs its pair stage on ``executor``
+    (``None``: in this process). The choice holds in the thread (or asyncio task) that entered
+    the block: a merge called from another thread runs in that thread, one pair after another."""
     if executor is not None and not isinstance(executor, Executor):
         # using("processes") failed deep in the merge: 'str' object has no attribute 'map'
         raise InputError(f"using() takes an Executor or None, got {executor!r}; make one with "

@@ -18,6 +18,7 @@ from fusionkit.errors import InputError
 from fusionkit.grid import OccupancyGrid
 from fusionkit.mapio import save_map
 from fusionkit.resample import resample
+from fusionkit.worlds import make_world
 
 CAVE = WorldSpec("cave", builtin="cave")
 OFFICE = WorldSpec("office", builtin="office")
@@ -151,6 +152,18 @@ def test_bad_settings_are_refused():
     with pytest.raises(InputError, match="seed must be a whole number >= 0"):
         BenchConfig(seed=-1)
     assert BenchConfig(seed=np.int64(3)).seed == 3
+
+
+def test_one_name_given_where_a_list_is_taken_is_one_name(tmp_path):
+    """BenchConfig(methods="consensus") said "unknown method 'c'", and find_worlds of a folder's
+    path "t: no such folder" (after globbing /*.yaml)."""
+    cfg = BenchConfig(methods="consensus", modes="crop")
+    assert cfg.methods == ("consensus",) and cfg.modes == ("crop",)
+    save_map(make_world("cave", 0), tmp_path / "cave.yaml")
+    for folder in (str(tmp_path), tmp_path):
+        worlds, _ = find_worlds(folder)
+        assert [w.name for w in worlds] == ["cave"]
+    assert [w.name for w in find_worlds(builtin="office")[0]] == ["office"]
 
 
 def test_a_negative_seed_is_one_line_and_exit_2(tmp_path, capsys):

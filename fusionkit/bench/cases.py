@@ -15,6 +15,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .._validate import names
 from ..errors import FusionkitError, InputError
 from ..grid import OCCUPIED, OccupancyGrid
 from ..io_carmen import NO_RETURN_FREE, RESOLUTION, SPLIT_OVERLAP
@@ -125,6 +126,7 @@ def find_worlds(folders: Sequence[str | os.PathLike] = (), builtin: Sequence[str
     from ..worlds import WORLDS
     worlds, skipped = [], []
     seen = set()
+    folders, builtin = names(folders), names(builtin)
     for folder in folders:
         d = Path(folder)
         if not d.is_dir():

@@ -8,6 +8,7 @@ import math
 import numbers
 from dataclasses import dataclass
 
+from .._validate import names
 from ..errors import InputError
 
 __all__ = ["BenchConfig", "MODES", "DEFAULT_METHODS", "OVERLAP_BINS"]
@@ -80,8 +81,8 @@ class BenchConfig:
 
     def __post_init__(self):
         from ..methods import METHODS
-        object.__setattr__(self, "methods", tuple(self.methods))
-        object.__setattr__(self, "modes", tuple(self.modes))
+        object.__setattr__(self, "methods", names(self.methods))
+        object.__setattr__(self, "modes", names(self.modes))
         object.__setattr__(self, "robots", tuple(int(k) for k in self.robots))
         if not self.methods:
             raise InputError("give at least one method to benchmark")
