@@ -152,6 +152,22 @@ def test_cli_explains_the_subcommand_and_refuses_a_missing_path(capsys, tmp_path
     assert len(err) == 1 and "no such file or directory" in err[0]
 
 
+def test_without_a_terminal_it_says_so_and_does_not_start(tmp_path):
+    """Started from a script (input not a terminal) with its output in a file, it wrote screens
+    into the file and kept a core busy until killed."""
+    import subprocess
+    import sys
+    out = tmp_path / "out.txt"
+    with open(out, "w") as f:
+        proc = subprocess.run([sys.executable, "-m", "fusionkit.cli", "tui", str(tmp_path)],
+                              stdin=subprocess.DEVNULL, stdout=f, stderr=subprocess.PIPE,
+                              text=True, timeout=60)
+    assert proc.returncode == 2 and out.read_text() == ""
+    assert proc.stderr.strip().splitlines() == [
+        "fusionkit tui: error: the terminal UI needs a terminal for its input and output; run it "
+        "in one (over SSH: ssh -t), not from a pipe or with its output in a file"]
+
+
 def test_a_run_directory_selects_its_robot_maps_not_the_world(in_root):
     app = make_app(["run"])
     assert [p.name for p in app._selected] == [f"robot_{k}.yaml" for k in range(1, ROBOTS + 1)]

@@ -33,6 +33,11 @@ def run(args) -> int:
         raise InputError(f"the terminal UI cannot start ({exc}); reinstall fusionkit with its "
                          f"dependencies (textual, textual-plotext)") from None
     app = make_app(args.paths)
+    if not (sys.stdin.isatty() and sys.stdout.isatty()):
+        # started from a script or with its output in a file, it drew into the file and read
+        # an input at its end over and over: a core busy until it was killed
+        raise InputError("the terminal UI needs a terminal for its input and output; run it in "
+                         "one (over SSH: ssh -t), not from a pipe or with its output in a file")
     said = threading.Lock()  # the line of an interrupt is said once, by whoever gets there first
 
     def say_interrupted() -> None:
