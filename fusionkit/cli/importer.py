@@ -73,7 +73,10 @@ def register(sub) -> None:
                         "(default: %(default)s: none, since a scanner also reports no return "
                         "when dazzled)")
     c.add_argument("--force", action="store_true",
-                   help="replace output files that already exist (an input is never replaced)")
+                   help="replace output files that already exist; over an earlier run (its "
+                        "truth.json) also remove its sessions beyond K and the merges of its maps "
+                        "that stand in the folder, and say which files went (an input is never "
+                        "replaced)")
     c.add_argument("--quiet", action="store_true", help="print nothing on success")
     c.set_defaults(func=run_carmen)
 

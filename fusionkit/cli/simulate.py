@@ -71,7 +71,7 @@ def register(sub) -> None:
                    help="odometry heading error (rad) per square-root metre travelled (default: %(default)s)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="run directory; must be new, empty, or hold an earlier run (its truth.json), "
-                        "which is replaced")
+                        "which is replaced, with the merges of its maps that stand in the folder")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)
 
