@@ -10,7 +10,7 @@ from typing import Sequence
 import numpy as np
 
 from .errors import InputError
-from .grid import UNKNOWN, OccupancyGrid
+from .grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from .mapping import MAX_CELLS
 from .resample import canvas_for, resample, transformed_bounds
 from .scanlog import ScanLog, load_scans, scans_path_for
@@ -84,8 +84,29 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
                              f"than the {MAX_CELLS} fusionkit can hold; choose a coarser map as "
                              "the reference, or crop this one")
         canvas = canvas_for([g], [Transform2D.identity()], res, margin_cells=0)
-        out.append(resample(g, Transform2D.identity(), canvas))
+        moved = resample(g, Transform2D.identity(), canvas)
+        if g.resolution < res:
+            moved = _keep_walls(g, moved)
+        out.append(moved)
     return out
+
+
+def _keep_walls(fine: OccupancyGrid, sampled: OccupancyGrid) -> OccupancyGrid:
+    """``sampled`` (``fine`` at coarser cells, each the fine cell under its centre) with every
+    coarse cell that holds a fine wall cell occupied, and every one that holds a known cell
+    known: a wall one fine cell thick fell between the centres and broke up, so that a map
+    finer than the reference was refused where, given first, it was placed."""
+    tri = fine.trinary()
+    r, c = np.nonzero(tri != UNKNOWN)
+    rows, cols = sampled.world_to_cell(fine.cell_to_world(r, c))
+    ri, ci = np.floor(rows).astype(np.int64), np.floor(cols).astype(np.int64)
+    inside = (ri >= 0) & (ri < sampled.rows) & (ci >= 0) & (ci < sampled.cols)
+    rank = np.zeros(sampled.shape, np.int8)            # 0 unknown, 1 free, 2 wall
+    np.maximum.at(rank, (ri[inside], ci[inside]), np.where(tri[r, c] == OCCUPIED, 2, 1)[inside])
+    data = np.array(sampled.data)
+    data[(rank == 1) & (data == UNKNOWN)] = FREE
+    data[rank == 2] = OCCUPIED
+    return OccupancyGrid(data, sampled.resolution, sampled.origin, sampled.name)
 
 
 def _unusable(grid: OccupancyGrid) -> str:

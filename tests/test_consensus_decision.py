@@ -135,6 +135,31 @@ def test_the_same_pair_at_two_resolutions_gets_the_same_decision(intel_crop):
     assert not estimate_pair(_finer(a), _finer(b)).accepted
 
 
+def _coarser(grid: OccupancyGrid) -> OccupancyGrid:
+    """``grid`` at twice its cell size, a coarse cell a wall when one of its four is (as a
+    mapper at that cell size draws it)."""
+    t = grid.trinary()
+    h, w = t.shape[0] // 2 * 2, t.shape[1] // 2 * 2
+    blocks = t[:h, :w].reshape(h // 2, 2, w // 2, 2)
+    data = np.where((blocks == OCCUPIED).any(axis=(1, 3)), OCCUPIED,
+                    np.where((blocks != UNKNOWN).any(axis=(1, 3)), FREE, UNKNOWN))
+    return OccupancyGrid(data.astype(np.int8), 2 * grid.resolution, grid.origin)
+
+
+def test_a_map_finer_than_the_reference_is_placed_as_the_reverse_order_places_it():
+    """A 0.05 m map given after a 0.1 m one was brought to 0.1 m by the cell under each coarse
+    cell's centre: its walls, one cell thick, fell between the centres and broke up, and it
+    was refused ("the placement may slide") where, given first, it placed the other."""
+    crop = crop_pair(load_map(REAL / "mit_stata_basement.yaml"), np.random.default_rng(5), size=300,
+                     min_overlap=0.5)
+    coarse = _coarser(crop.b)
+    first = merge([crop.a, coarse])
+    second = merge([coarse, crop.a])
+    assert first.placements[1].merged and second.placements[1].merged, second.placements[1].reason
+    back = second.placements[1].transform.inverse
+    assert back.error_to(first.placements[1].transform)[0] < 2 * coarse.resolution
+
+
 def _padded(grid: OccupancyGrid, cells: int) -> OccupancyGrid:
     """The same map in the same frame, with ``cells`` unknown cells around it."""
     x, y, yaw = grid.origin
