@@ -443,10 +443,15 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         reason = ("nothing to judge a placement by: too few walls overlap at any placement to tell "
                   "a right one from a wrong one")
     else:
+        # "99% of the walls meet where wrong placements reach 13%" read as a clear win: the
+        # count of walls, too small to be sure among the placements tried, is what decides
+        chk = best.check
         reason = (f"best placement is not distinguishable from chance: "
-                  f"{100 * best.check.score:.0f}% of the walls meet where wrong placements of these "
-                  f"maps reach {100 * null.p0:.0f}%, too few walls for that to be sure "
-                  f"(expected false alarms 10^{log_nfa:.1f}, allowed {eps:g})")
+                  f"{100 * chk.score:.0f}% of the walls meet where wrong placements of these "
+                  f"maps reach {100 * null.p0:.0f}%, but over too few walls ({chk.agreeing} wall "
+                  f"cells meet, {chk.disagreeing} miss) to be sure among the placements tried: "
+                  f"10^{log_nfa:.1f} wrong placements are expected to fit as well, where "
+                  f"{eps:g} is allowed")
     if cfg.polish:
         # what was decided stays; the placements handed on lose the pairing's bias (._polish)
         done = {id(best): best if on_scans else replace(best, transform=polish(a, b, best.transform))}
