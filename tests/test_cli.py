@@ -199,6 +199,21 @@ def test_a_file_given_for_a_folder_is_said_to_be_a_file(tmp_path, capsys, monkey
     assert not (tmp_path / "out").exists()
 
 
+def test_one_map_or_a_pattern_that_matched_nothing_is_said_as_such(tmp_path, capsys):
+    """A shell pattern that matches no file reaches the command as written: it said only "give
+    at least two maps to merge", not that no such file exists."""
+    from fusionkit.mapio import save_map
+    from fusionkit.worlds import make_world
+    save_map(make_world("cave", 0), tmp_path / "a.yaml")
+    for given, said in ((str(tmp_path / "nothere" / "robot_*.yaml"), "robot_*.yaml': no such map file (a "
+                         "pattern such as robot_*.yaml that matches no file is passed on as it is); "
+                         "give at least two maps to merge"),
+                        (str(tmp_path / "a.yaml"), "give at least two maps to merge")):
+        assert main(["merge", given, "-o", str(tmp_path / "m.yaml")]) == 2
+        err = capsys.readouterr().err.splitlines()
+        assert len(err) == 1 and err[0].endswith(said), err
+
+
 def test_a_map_given_twice_is_refused_in_one_line(tmp_path, capsys):
     """The same file under one path or two (``a/../a``, a link) is one map: merged with itself it
     would be placed on itself and listed twice in the report."""

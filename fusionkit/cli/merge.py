@@ -64,6 +64,11 @@ def run(args) -> int:
     report_path = Path(args.report) if args.report else out.with_name(out.stem + ".report.json")
     image_path = out.with_suffix(".pgm")
     if len(args.maps) < 2:
+        if len(args.maps) == 1 and not os.path.lexists(args.maps[0]):
+            # most often a shell pattern that matched nothing, passed on as it was written
+            raise InputError(f"{show(args.maps[0], 200)}: no such map file (a pattern such as "
+                             f"robot_*.yaml that matches no file is passed on as it is); give at "
+                             f"least two maps to merge")
         raise InputError("give at least two maps to merge")
     inputs = list(args.maps)
     check_writable([out, image_path, report_path])
