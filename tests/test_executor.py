@@ -345,12 +345,19 @@ def test_a_refused_connection_or_an_unknown_host_is_said_as_such(tmp_path, capsy
     starting), then said only that it had timed out; the port is free, the host's name cannot
     exist (.invalid)."""
     address = f"tcp://{host}:{_free_port()}"
+    err = _scheduler_error(tmp_path, capsys, address, timeout=5)
+    assert f"no Dask scheduler answered at {address} ({said}" in err, err
+
+
+def _scheduler_error(tmp_path, capsys, address: str, timeout: float = 2) -> str:
+    """The one line of ``bench --scheduler address`` (exit 2 asserted)."""
     with deadline(60):
         code = main(["bench", "--worlds", "cave", "--cases", "1", "--out", str(tmp_path / "b"),
-                     "--scheduler", address, "--scheduler-timeout", "5"])
+                     "--scheduler", address, "--scheduler-timeout", str(timeout)])
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"no Dask scheduler answered at {address} ({said}" in err[0], err
+    assert len(err) == 1 and "Traceback" not in err[0], err
+    return err[0]
 
 
 @pytest.mark.parametrize("scheme", ["tls", "ucx"])
@@ -358,14 +365,10 @@ def test_a_scheme_this_machine_cannot_speak_is_one_line_and_exit_2(tmp_path, cap
     """tls:// without certificates in Dask's configuration, ucx:// without UCX: a traceback of
     60 lines and exit 1."""
     address = f"{scheme}://127.0.0.1:{_free_port()}"
-    with deadline(60):
-        code = main(["bench", "--worlds", "cave", "--cases", "1", "--out", str(tmp_path / "b"),
-                     "--scheduler", address, "--scheduler-timeout", "2"])
-    assert code == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and address in err[0] and "Traceback" not in err[0], err
+    err = _scheduler_error(tmp_path, capsys, address)
+    assert address in err, err
     if scheme == "tls":
-        assert "certificates in Dask's configuration" in err[0], err
+        assert "certificates in Dask's configuration" in err, err
 
 
 @pytest.mark.parametrize("address", ["http://127.0.0.1:8787", "tcp://", "tcp://:8786",
@@ -374,12 +377,7 @@ def test_a_scheme_this_machine_cannot_speak_is_one_line_and_exit_2(tmp_path, cap
 def test_a_scheduler_address_dask_cannot_use_is_one_line_and_exit_2(tmp_path, capsys, address):
     """The dashboard's http://HOST:8787, an easy slip, or tcp:// with no host gave two
     tracebacks and exit 1."""
-    with deadline(60):
-        code = main(["bench", "--worlds", "cave", "--cases", "1", "--out", str(tmp_path / "b"),
-                     "--scheduler", address, "--scheduler-timeout", "2"])
-    assert code == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "tcp://HOST:PORT" in err[0] and "Traceback" not in err[0], err
+    assert "tcp://HOST:PORT" in _scheduler_error(tmp_path, capsys, address)
     with pytest.raises(InputError, match="back end"):
         make_executor("cluster")
 
