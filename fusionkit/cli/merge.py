@@ -185,10 +185,10 @@ class OutputGuard:
 def protected_inputs(inputs) -> list[Path]:
     """Every file a merge reads: each map YAML, the image it names and its scan log."""
     from ..mapio import _protected
+    from ..scanlog import scans_path_for
 
     # (a path with no name of its own, "." or "/", is no map: refused as a folder when read)
-    return _protected(inputs) + [Path(m).with_name(Path(m).stem + ".scans.npz") for m in inputs
-                                 if Path(m).name]
+    return _protected(inputs) + [scans_path_for(m) for m in inputs if Path(m).name]
 
 
 #: How :func:`check_not_input` names a file of :func:`run_truth`
