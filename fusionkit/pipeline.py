@@ -32,6 +32,7 @@ from .alignment import AlignmentConfig
 from .errors import FusionkitError, InputError
 from .fusion import FusedMap, fuse_maps
 from .grid import OccupancyGrid
+from .labels import unique_labels
 from .methods import METHODS, get_method
 from .methods.base import MergeEvent, MergeStep, PreparedMaps
 from .methods.consensus import ConsensusConfig
@@ -381,7 +382,10 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
         k = next(i for i, g in enumerate(grids) if any(g is h for h in grids[:i]))
         raise InputError(f"map {k + 1} is the same OccupancyGrid object as an earlier map; give "
                          f"each map once (a map merged with itself is placed on itself)")
-    names = [g.name or f"map_{k + 1}" for k, g in enumerate(grids)]
+    # maps read from files are named by the shortest end of their paths that tells them apart
+    # (two runs' robot_1.yaml were both "robot_1", and a dict of placements by name lost one)
+    names = (unique_labels(maps) if grids is not maps else
+             [g.name or f"map_{k + 1}" for k, g in enumerate(grids)])
     # a map read from a file is named as it was given, as every other error about it is
     ref_name = os.fspath(maps[config.reference]) if grids is not maps else names[config.reference]
     if not grids[config.reference].known_mask().any():

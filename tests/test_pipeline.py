@@ -394,3 +394,16 @@ def test_the_report_gives_the_paths_merge_was_given_and_can_be_written_as_json(r
     assert report["output"] == "out.yaml" and json.loads(json.dumps(report)) == report
     with pytest.raises(InputError, match="one name or path per map"):
         merge(paths).report(inputs="ab")
+
+
+def test_maps_read_from_files_of_one_name_in_two_folders_get_names_that_tell_them_apart(tmp_path):
+    """Two runs' robot_2.yaml were both named "robot_2": a dict of placements by name lost one."""
+    for k, (folder, name) in enumerate((("a", "robot_1"), ("a", "robot_2"), ("b", "robot_2"))):
+        (tmp_path / folder).mkdir(exist_ok=True)
+        save_map(make_world("cave", k, size=(20.0, 16.0)), tmp_path / folder / f"{name}.yaml")
+    paths = [tmp_path / "a" / "robot_1.yaml", tmp_path / "a" / "robot_2.yaml",
+             tmp_path / "b" / "robot_2.yaml"]
+    result = merge(paths, config=MergeConfig(method="map-merge"))
+    assert [p.name for p in result.placements] == ["robot_1", "a/robot_2", "b/robot_2"]
+    assert [p.name for p in merge(paths[:2], config=MergeConfig(method="map-merge")).placements] == \
+        ["robot_1", "robot_2"]
