@@ -96,6 +96,10 @@ class OccupancyGrid:
             origin = (*origin, 0.0)
         if len(origin) != 3 or not all(math.isfinite(v) for v in origin):
             raise InputError(f"grid origin must be finite (x, y, yaw), got {self.origin}")
+        if abs(origin[2]) > 2 * math.pi:
+            # a yaw of 90 (degrees) turned the map by 90 rad, without a word
+            raise InputError(f"grid origin's yaw {origin[2]:g} is more than a full turn: give it in "
+                             f"radians (math.radians({origin[2]:g}) = {math.radians(origin[2]):.6g})")
         data.setflags(write=False)
         object.__setattr__(self, "data", data)
         object.__setattr__(self, "resolution", res)

@@ -138,6 +138,12 @@ def _read_yaml(yaml_path: Path) -> _MapYaml:
         raise MapFormatError(
             f"{_short(yaml_path)}: 'origin' must lie within {_ORIGIN_LIMIT:g} m (and rad) of 0, got "
             f"{show(doc['origin'])}; fix the origin")
+    if abs(origin[2]) > 2 * math.pi:
+        # yaw 90 (degrees) turned the map by 90 rad (2.04 rad once wrapped), without a word
+        raise MapFormatError(
+            f"{_short(yaml_path)}: the origin's yaw {origin[2]:g} is more than a full turn: "
+            f"give it in radians (as map_server reads it), e.g. {math.radians(origin[2]):.6g} "
+            f"for {origin[2]:g} degrees")
 
     negate = doc["negate"]
     if isinstance(negate, bool):

@@ -17,6 +17,7 @@ from fusionkit.transform import Transform2D, wrap_angle
 
 coord = st.floats(-1e3, 1e3, allow_nan=False)
 angle = st.floats(-20.0, 20.0, allow_nan=False)
+turn = st.floats(-2 * math.pi, 2 * math.pi, allow_nan=False)   # a grid origin's yaw (radians)
 transforms = st.builds(Transform2D, coord, coord, angle)
 points = st.lists(st.tuples(coord, coord), min_size=1, max_size=20).map(np.array)
 
@@ -72,7 +73,7 @@ def test_apply_pose_turns_headings():
 
 # -- OccupancyGrid ---------------------------------------------------------------------------
 @settings(max_examples=50)
-@given(st.floats(0.01, 1.0), coord, coord, angle, st.integers(0, 49), st.integers(0, 79))
+@given(st.floats(0.01, 1.0), coord, coord, turn, st.integers(0, 49), st.integers(0, 79))
 def test_cell_world_round_trip(res, ox, oy, yaw, r, c):
     g = OccupancyGrid(np.zeros((50, 80), np.int8), res, (ox, oy, yaw))
     rr, cc = g.world_to_cell(g.cell_to_world(r, c))
@@ -268,6 +269,9 @@ def test_a_grid_refuses_masks_and_out_of_range_int8_and_never_freezes_the_caller
             OccupancyGrid(mine, bad)
     with pytest.raises(InputError, match=r"origin must be \(x, y, yaw\) numbers"):
         OccupancyGrid(mine, 0.1, "abc")
+    with pytest.raises(InputError, match=r"yaw 90 is more than a full turn: give it in radians"):
+        OccupancyGrid(mine, 0.1, (0.0, 0.0, 90.0))       # degrees: it was turned by 90 rad
+    assert OccupancyGrid(mine, 0.1, (0.0, 0.0, -math.pi)).origin[2] == -math.pi
 
 
 def test_a_scan_log_keeps_its_own_arrays_and_refuses_angles_in_degrees():

@@ -446,6 +446,8 @@ def _bad_cases():
         ("origin of 2", keys(origin=[0.0, 0.0]), "m.yaml", "origin"),
         ("origin not numbers", keys(origin=[0.0, "a", 0.0]), "m.yaml", "origin"),
         ("origin scalar", keys(origin=3.0), "m.yaml", "origin"),
+        ("yaw in degrees", keys(origin=[0.0, 0.0, 90.0]), "m.yaml",
+         "yaw 90 is more than a full turn: give it in radians"),
         ("occupied above 1", keys(occupied_thresh=1.5), "m.yaml", "occupied_thresh"),
         ("free below 0", keys(free_thresh=-0.1), "m.yaml", "free_thresh"),
         ("free above occupied", keys(free_thresh=0.7, occupied_thresh=0.65), "m.yaml", "smaller"),
