@@ -150,7 +150,11 @@ class DaskExecutor(Executor):
                 raise InputError(f"the Dask workers at {address} cannot import fusionkit "
                                  f"({failed[0]}); install the same fusionkit (with its "
                                  f"dependencies) on every worker") from None
-            other = _differences(self._client.run(_installed).values())
+            # asked by value (Python's eval of this module's source): a worker's older
+            # fusionkit has no such function to call
+            answers = self._client.run(eval, _INSTALLED_CALL, on_error="return").values()
+            other = _differences([a if isinstance(a, tuple) else (("fusionkit", repr(a)),)
+                                  for a in answers])
             if other:
                 self.close()
                 raise InputError(f"the Dask workers at {address} run {other}; install this "
@@ -344,21 +348,28 @@ class DaskExecutor(Executor):
 _RESULT_LIBRARIES = ("numpy", "scipy", "cv2", "numba")
 
 
+#: What a run's results depend on, as a process has it: a digest of fusionkit's own code (a
+#: worker may hold another checkout of the same version) and the libraries' versions, as
+#: ``result``. Source, so that a worker runs it whatever fusionkit it holds.
+_INSTALLED = f"""
+import hashlib, importlib, pathlib
+import fusionkit
+root = pathlib.Path(fusionkit.__file__).parent
+digest = hashlib.sha256()
+for path in sorted(root.rglob("*.py")):
+    digest.update(path.relative_to(root).as_posix().encode() + bytes(1) + path.read_bytes())
+result = (("fusionkit", digest.hexdigest()[:12]),) + tuple(
+    (name, importlib.import_module(name).__version__) for name in {_RESULT_LIBRARIES!r})
+"""
+
+#: One expression that runs :data:`_INSTALLED` and gives its ``result`` (for ``eval``)
+_INSTALLED_CALL = f"(lambda ns: (exec({_INSTALLED!r}, ns), ns['result'])[1])({{}})"
+
+
 @functools.cache
 def _installed() -> tuple:
-    """What a run's results depend on, as this process has it: a digest of fusionkit's own
-    code (a worker may hold another checkout of the same version) and the libraries' versions.
-    Run on each worker of a cluster given by its address, and here."""
-    import hashlib
-    import importlib
-    from pathlib import Path
-
-    root = Path(__file__).parent
-    digest = hashlib.sha256()
-    for path in sorted(root.rglob("*.py")):
-        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes())
-    return (("fusionkit", digest.hexdigest()[:12]),
-            *((name, importlib.import_module(name).__version__) for name in _RESULT_LIBRARIES))
+    """:data:`_INSTALLED`'s ``result`` in this process."""
+    return eval(_INSTALLED_CALL)   # noqa: S307 - this module's own source
 
 
 def _differences(theirs) -> str:

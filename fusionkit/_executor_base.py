@@ -17,17 +17,19 @@ Progress = Callable[[int, int], None]
 WORKERS_PER_CORE = 8
 
 
-def check_local_workers(workers, said: str | None = None, cluster: str = "a scheduler's address") -> int:
-    """``workers``, a whole number from 1 to :data:`WORKERS_PER_CORE` a core of this machine,
-    or :class:`InputError` (``said`` names it: ``"--workers 1000"``). A typo, 1000 for 10,
-    started a thousand processes on two cores and took minutes to stop."""
+def check_local_workers(workers, name: str = "workers", *, said: str | None = None,
+                        cluster: str = "a scheduler's address") -> int:
+    """``workers`` (the argument ``name``), a whole number from 1 to :data:`WORKERS_PER_CORE`
+    a core of this machine, or :class:`InputError` (``said`` names it on a command line:
+    ``"--workers 1000"``). A typo, 1000 for 10, started a thousand processes on two cores and
+    took minutes to stop."""
     from .errors import InputError
 
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
+        raise InputError(f"{name} must be a whole number >= 1, got {workers!r}")
     cores = os.cpu_count() or 1
     if workers > WORKERS_PER_CORE * cores:
-        raise InputError(f"{said or f'workers={workers}'} would start {workers} workers on this "
+        raise InputError(f"{said or f'{name}={workers}'} would start {workers} workers on this "
                          f"machine's {cores} cores; give at most {WORKERS_PER_CORE * cores} "
                          f"({WORKERS_PER_CORE} a core), or {cluster} for a cluster")
     return workers

@@ -75,9 +75,7 @@ class InProcess(Executor):
     name = "inprocess"
 
     def __init__(self, threads: int = 1):
-        if not isinstance(threads, int) or threads < 1:
-            raise InputError(f"threads must be a whole number >= 1, got {threads!r}")
-        self.workers = threads
+        self.workers = check_local_workers(threads, "threads")
 
     def map(self, fn, tasks, *, shared=None, progress=None):
         tasks = list(tasks)
@@ -229,8 +227,8 @@ def make_executor(backend: str | None = None, *, workers: int | None = None,
         if backend not in (None, "dask"):
             raise InputError(f"--scheduler is a Dask scheduler; it cannot be used with --backend {backend}")
         return DaskExecutor(address=scheduler, timeout=timeout)
-    if workers is not None and (not isinstance(workers, int) or workers < 1):
-        raise InputError(f"workers must be a whole number >= 1, got {workers!r}")
+    if workers is not None:
+        check_local_workers(workers)
     if backend == "dask":
         return DaskExecutor(workers or os.cpu_count() or 1, timeout=timeout, dashboard=dashboard)
     if backend == "processes" or (backend is None and workers is not None and workers > 1):

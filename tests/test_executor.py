@@ -503,7 +503,8 @@ def _external_cluster(tmp_path, *scheduler_args, workers: int = 1, without_fusio
     """A scheduler and a worker on loopback, started as a user starts them; yields the
     scheduler's port and process. Both are stopped by their handles at the end.
     ``without_fusionkit`` ("worker" or "scheduler"): that one cannot import fusionkit;
-    "other": the worker imports another copy of fusionkit, one line of its code changed."""
+    "other": the worker imports another copy of fusionkit, one line of its code changed and
+    without ``fusionkit._dask._installed`` (as an older one)."""
     import os
     import subprocess
     from pathlib import Path
@@ -522,6 +523,9 @@ def _external_cluster(tmp_path, *scheduler_args, workers: int = 1, without_fusio
                         ignore=shutil.ignore_patterns("__pycache__"))
         with open(copy / "transform.py", "a") as f:
             f.write("\n# another checkout\n")
+        # an older checkout, without the function that says what a process runs
+        dask_py = copy / "_dask.py"
+        dask_py.write_text(dask_py.read_text().replace("def _installed(", "def _renamed("))
     bare = dict(env, PYTHONPATH=os.pathsep.join([str(tmp_path / "absent"), env["PYTHONPATH"]]))
     scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host",
                                   "127.0.0.1", "--port", str(port), *scheduler_args],
@@ -705,6 +709,13 @@ def test_far_more_workers_than_cores_or_a_using_of_no_executor_is_refused_from_p
         with pytest.raises(InputError, match=re.escape(said)):
             make()
     assert LocalProcesses(16).workers == 16
+    with pytest.raises(InputError, match=r"^workers=17 would start 17 workers"):
+        make_executor("inprocess", workers=17)       # 17 threads
+    with pytest.raises(InputError, match=r"^threads=17 would start 17 workers"):
+        InProcess(17)
+    for wrong in (True, 2.0):
+        with pytest.raises(InputError, match=r"^workers must be a whole number >= 1"):
+            make_executor(workers=wrong)
     for wrong in ("processes", 4):
         with pytest.raises(InputError, match=r"^using\(\) takes an Executor or None, got"):
             with using(wrong):

@@ -44,6 +44,6 @@ def executor_from_args(args, *, jobs: int | None = None):
         raise InputError("--scheduler-timeout is how long to wait for --scheduler; give both, or "
                          "neither")
     if workers is not None:
-        check_local_workers(workers, f"--workers {workers}", "--scheduler")
+        check_local_workers(workers, said=f"--workers {workers}", cluster="--scheduler")
     return make_executor(args.backend, workers=workers, scheduler=args.scheduler,
                          timeout=10.0 if args.scheduler_timeout is None else args.scheduler_timeout)
