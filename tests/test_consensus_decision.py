@@ -604,7 +604,9 @@ def test_the_wider_search_of_a_map_left_out_does_not_merge_two_buildings():
     p = shipped.placements[1]
     assert not p.merged and "not distinguishable from chance" in p.reason
     # the share of walls that meet is said with the count that makes it too little to be sure
-    assert re.search(r"but over too few walls \(\d+ wall cells meet, \d+ miss\) to be sure among "
+    assert re.search(r"of the walls of the map that agrees less, \d+% meet the other's, where wrong "
+                     r"placements of these maps reach \d+%, but over too few walls \(\d+ wall cells "
+                     r"meet and \d+ miss, both maps' together\) to be sure among "
                      r"the placements tried: 10\^-?[\d.]+ wrong placements are expected to fit as "
                      r"well, where 0.01 is allowed$", p.reason), p.reason
     # judged with the first search's calibration alone, the same search merges it

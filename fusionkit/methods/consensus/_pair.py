@@ -446,12 +446,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
         # "99% of the walls meet where wrong placements reach 13%" read as a clear win: the
         # count of walls, too small to be sure among the placements tried, is what decides
         chk = best.check
-        reason = (f"best placement is not distinguishable from chance: "
-                  f"{100 * chk.score:.0f}% of the walls meet where wrong placements of these "
-                  f"maps reach {100 * null.p0:.0f}%, but over too few walls ({chk.agreeing} wall "
-                  f"cells meet, {chk.disagreeing} miss) to be sure among the placements tried: "
-                  f"10^{log_nfa:.1f} wrong placements are expected to fit as well, where "
-                  f"{eps:g} is allowed")
+        reason = (f"best placement is not distinguishable from chance: of the walls of the map "
+                  f"that agrees less, {100 * chk.score:.0f}% meet the other's, where wrong "
+                  f"placements of these maps reach {100 * null.p0:.0f}%, but over too few walls "
+                  f"({chk.agreeing} wall cells meet and {chk.disagreeing} miss, both maps' together) "
+                  f"to be sure among the placements tried: 10^{log_nfa:.1f} wrong placements are "
+                  f"expected to fit as well, where {eps:g} is allowed")
     if cfg.polish:
         # what was decided stays; the placements handed on lose the pairing's bias (._polish)
         done = {id(best): best if on_scans else replace(best, transform=polish(a, b, best.transform))}
