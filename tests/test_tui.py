@@ -140,6 +140,20 @@ def test_fused_preview_colours_cells_by_the_map_that_gave_them():
     assert [seg.style.color.name for seg in b for _ in seg.text] == [STATE_COLOURS[FREE_RANK]] * 2
 
 
+def test_a_map_with_a_wide_unknown_margin_is_drawn_by_its_known_cells():
+    """A map saved on map_saver's 4000 x 4000 grid drew as a black square with a dot."""
+    from fusionkit.worlds import make_world
+    from fusionkit_tui.widgets.map_preview import preview_strips
+    room = make_world("office", 0, size=(20.0, 16.0))
+    padded = OccupancyGrid(np.pad(room.data, 1500, constant_values=-1), room.resolution)
+    text = lambda g: ["".join(seg.text for seg in strip) for strip in preview_strips(g, 60, 20,
+                                                                                     no_color=True)]
+    rows, cols = np.flatnonzero(room.known_mask().any(axis=1)), np.flatnonzero(room.known_mask().any(axis=0))
+    known = room.with_data(room.data[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1])
+    assert text(padded) == text(known)
+    assert sum(ch != " " for line in text(padded) for ch in line) > 500    # the office, not a dot
+
+
 # -- command line ---------------------------------------------------------------------------------
 def test_cli_explains_the_subcommand_and_refuses_a_missing_path(capsys, tmp_path):
     with pytest.raises(SystemExit) as exc:

@@ -136,6 +136,21 @@ def _mono_char(top: int, bottom: int) -> str:
     return " "
 
 
+def _known_part(grid: OccupancyGrid, owner: np.ndarray | None):
+    """``grid`` (and ``owner``) cut to the box of its known cells when the unknown around them is
+    wider than half of it (map_saver's 4000 x 4000 grid around a robot's 300 x 300 cells drew
+    as a black square with a dot); as they are otherwise."""
+    known = grid.known_mask()
+    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
+    if rows.size == 0:
+        return grid, owner
+    h, w = rows[-1] + 1 - rows[0], cols[-1] + 1 - cols[0]
+    if grid.rows - h <= h / 2 and grid.cols - w <= w / 2:
+        return grid, owner
+    cut = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+    return (grid.with_data(grid.data[cut]), None if owner is None else owner[cut])
+
+
 def preview_strips(grid: OccupancyGrid, width: int, height: int, *,
                    owner: np.ndarray | None = None, no_color: bool = False,
                    base: Style | None = None) -> list[Strip]:
@@ -156,6 +171,7 @@ def preview_strips(grid: OccupancyGrid, width: int, height: int, *,
     base = base or Style()
     if width < 1 or height < 1:
         return []
+    grid, owner = _known_part(grid, owner)
     rank, owners = downsample(grid, width, 2 * height, owner)
     if rank.shape[0] % 2:  # an odd number of pixel rows: the last cell row has an empty bottom
         rank = np.vstack([rank, np.full((1, rank.shape[1]), -1, np.int8)])
