@@ -51,6 +51,15 @@ def _check_cells(raw: np.ndarray) -> None:
                          "np.where(mask == 1, 100, 0))")
 
 
+def box_of(mask: np.ndarray) -> tuple[int, int, int, int] | None:
+    """``(r0, r1, c0, c1)``: rows ``r0:r1`` and columns ``c0:c1`` hold every true cell of the 2-D
+    ``mask``; None when none is true."""
+    rows, cols = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0:
+        return None
+    return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
 @dataclass(frozen=True, eq=False)
 class OccupancyGrid:
     """A 2-D occupancy grid in the ``nav_msgs/OccupancyGrid`` convention.
@@ -133,6 +142,11 @@ class OccupancyGrid:
 
     def known_mask(self) -> np.ndarray:
         return self.data >= 0
+
+    def known_box(self) -> tuple[int, int, int, int] | None:
+        """Rows ``r0:r1`` and columns ``c0:c1`` of the box holding every known cell, as
+        ``(r0, r1, c0, c1)``; None when no cell is known."""
+        return box_of(self.known_mask())
 
     def occupied_mask(self) -> np.ndarray:
         return self.data >= 50

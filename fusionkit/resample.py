@@ -87,13 +87,14 @@ def resample(source: OccupancyGrid, transform: Transform2D, target: OccupancyGri
 def transformed_bounds(grid: OccupancyGrid, transform: Transform2D, known_only: bool = True):
     """``(xmin, ymin, xmax, ymax)`` (m) of ``grid``'s (known) cells after ``transform``."""
     if known_only:
-        r, c = np.nonzero(grid.known_mask())
-        if r.size == 0:
+        box = grid.known_box()
+        if box is None:
             return None
         # the known cells' bounding box in cell space; its four corners bound them after any
         # rigid motion
-        rr = np.array([r.min(), r.min(), r.max() + 1, r.max() + 1], float) - 0.5
-        cc = np.array([c.min(), c.max() + 1, c.min(), c.max() + 1], float) - 0.5
+        r0, r1, c0, c1 = box
+        rr = np.array([r0, r0, r1, r1], float) - 0.5
+        cc = np.array([c0, c1, c0, c1], float) - 0.5
         pts = grid.cell_to_world(rr, cc)
     else:
         h, w = grid.rows, grid.cols

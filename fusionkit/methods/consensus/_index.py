@@ -240,14 +240,11 @@ def _trimmed(grid: OccupancyGrid) -> OccupancyGrid:
     A map saved with a wide unknown margin (map_saver's 4000 x 4000 cells) was searched on a
     raster sized to the whole grid, so coarse that the true placement was missed: the decision
     must not depend on how much unknown surrounds a map."""
-    known = grid.known_mask()
-    r = np.flatnonzero(known.any(axis=1))
-    c = np.flatnonzero(known.any(axis=0))
-    if r.size == 0:
+    box = grid.known_box()
+    if box is None:
         return grid
-    r0, c0 = max(0, int(r[0]) - TRIM_MARGIN), max(0, int(c[0]) - TRIM_MARGIN)
-    r1 = min(grid.rows, int(r[-1]) + 1 + TRIM_MARGIN)
-    c1 = min(grid.cols, int(c[-1]) + 1 + TRIM_MARGIN)
+    r0, c0 = max(0, box[0] - TRIM_MARGIN), max(0, box[2] - TRIM_MARGIN)
+    r1, c1 = min(grid.rows, box[1] + TRIM_MARGIN), min(grid.cols, box[3] + TRIM_MARGIN)
     if (r0, c0, r1, c1) == (0, 0, grid.rows, grid.cols):
         return grid
     x, y = grid.origin_transform(np.array([c0 * grid.resolution, r0 * grid.resolution]))

@@ -10,6 +10,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ...alignment import make_field
+from ...grid import box_of
 from ...transform import Transform2D
 from ._config import ConsensusConfig
 from ._hypotheses import cluster_hypotheses, scan_hypotheses
@@ -128,13 +129,10 @@ def corners(index: MapIndex) -> np.ndarray:
 
 
 def _corners(index: MapIndex) -> np.ndarray:
-    # the bounding box from the rows and columns holding a known cell
-    r = np.flatnonzero(index.known.any(axis=1))
-    c = np.flatnonzero(index.known.any(axis=0))
-    if r.size == 0:
-        r, c = np.array([0, index.grid.rows - 1]), np.array([0, index.grid.cols - 1])
-    rr = np.array([r.min(), r.min(), r.max(), r.max()], float)
-    cc = np.array([c.min(), c.max(), c.min(), c.max()], float)
+    # the centres of the corner cells of the box of known cells (of the whole grid without one)
+    r0, r1, c0, c1 = box_of(index.known) or (0, index.grid.rows, 0, index.grid.cols)
+    rr = np.array([r0, r0, r1 - 1, r1 - 1], float)
+    cc = np.array([c0, c1 - 1, c0, c1 - 1], float)
     return index.grid.cell_to_world(rr, cc)
 
 

@@ -140,14 +140,14 @@ def _known_part(grid: OccupancyGrid, owner: np.ndarray | None):
     """``grid`` (and ``owner``) cut to the box of its known cells when the unknown around them is
     wider than half of it (map_saver's 4000 x 4000 grid around a robot's 300 x 300 cells drew
     as a black square with a dot); as they are otherwise."""
-    known = grid.known_mask()
-    rows, cols = np.flatnonzero(known.any(axis=1)), np.flatnonzero(known.any(axis=0))
-    if rows.size == 0:
+    box = grid.known_box()
+    if box is None:
         return grid, owner
-    h, w = rows[-1] + 1 - rows[0], cols[-1] + 1 - cols[0]
+    r0, r1, c0, c1 = box
+    h, w = r1 - r0, c1 - c0
     if grid.rows - h <= h / 2 and grid.cols - w <= w / 2:
         return grid, owner
-    cut = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+    cut = (slice(r0, r1), slice(c0, c1))
     return (grid.with_data(grid.data[cut]), None if owner is None else owner[cut])
 
 
