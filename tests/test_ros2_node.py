@@ -556,8 +556,10 @@ def test_a_dropped_robot_leaves_no_transform_for_a_subscriber_that_comes_later(p
     fk.save_map(corner, tmp_path / "corner.yaml")
     probe_out = tmp_path / "probe.jsonl"
     _probe(procs, probe_out, "robot_1", "robot_2")
+    # robot_1 is named the reference: both maps come at once, and the first to arrive would be
     procs.start("node", MERGE_NODE + ["--ros-args", "-p", "discovery_rate:=2.0",
-                                      "-p", "estimation_rate:=1.0"])
+                                      "-p", "estimation_rate:=1.0",
+                                      "-p", "reference_robot:=/robot_1"])
     procs.start("pub", [sys.executable, "-c", SEQUENCE_PUBLISHER,
                         f"robot_1={run3 / 'robot_1.yaml'}@0", f"robot_2={run3 / 'robot_2.yaml'}@0",
                         f"robot_2={tmp_path / 'corner.yaml'}@12"])
