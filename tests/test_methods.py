@@ -75,6 +75,41 @@ def test_peer_confidence_goes_to_the_map_each_link_placed():
     assert all(0.9 <= c <= 1.0 for c in conf), conf
 
 
+def _windows_of_a_basement():
+    """Three 623-cell windows of the MIT basement, each in its own frame: A at the top left, B at
+    the bottom right turned 90 degrees, C at the centre (B meets A only through C)."""
+    from fusionkit.grid import OccupancyGrid
+    img = load_map(REAL / "mit_stata_basement.yaml").data[::-1]     # rows from the top
+    rows, cols = np.nonzero(img >= 0)
+    r0, c0, hh, ww = rows.min(), cols.min(), np.ptp(rows), np.ptp(cols)
+    win = int(0.6 * max(hh, ww))
+    corners = {"A": (r0, c0), "B": (r0 + hh - win, c0 + ww - win),
+               "C": (r0 + (hh - win) // 2, c0 + (ww - win) // 2)}
+    grids = []
+    for name, (r, c) in corners.items():
+        sub = img[r:r + win, c:c + win]
+        sub = np.rot90(sub) if name == "B" else sub
+        grids.append(OccupancyGrid(np.ascontiguousarray(sub[::-1]), 0.05, (0.0, 0.0, 0.0), name))
+    return grids
+
+
+def test_the_papers_method_reports_the_common_tests_confidence_not_its_share_of_walls():
+    """The paper's method merged B turned 176 degrees from its place with confidence 1.00 (all
+    its overlapping walls agreed): its confidence was its share of walls, not how sure the
+    placement is. It still merges what its rule accepts; the confidence is now the consensus
+    test's, as every other method's, and says that placement cannot be told from chance."""
+    grids = _windows_of_a_basement()
+    paper = merge(grids, config=MergeConfig(method="spectral-pso", seed=0))
+    right = merge(grids, config=MergeConfig(method="consensus", seed=0))
+    assert all(p.merged and p.confidence > 0.99 for p in right.placements)
+    b_paper, b_right = paper.placements[1].transform, right.placements[1].transform
+    assert paper.placements[1].merged and b_paper is not None
+    dist, ang = b_paper.error_to(b_right)
+    assert dist > 5.0 and ang > np.radians(90)        # the paper's rule took a wrong placement
+    assert paper.placements[1].confidence < 0.01
+    assert paper.placements[0].confidence == 1.0       # the reference
+
+
 def test_map_merge_gives_the_same_bits_every_time_in_one_process():
     # its bundle adjustment has a free gauge (every map moved together): held at the chain's
     # first map, the same input gives the same transforms, whatever ran before in the process

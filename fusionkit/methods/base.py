@@ -13,7 +13,7 @@ A method is any object with a ``name``, ``settings(config)`` (its frozen setting
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Protocol
 
 import numpy as np
@@ -24,7 +24,7 @@ from ..pso import PSOState
 from ..transform import Transform2D
 
 __all__ = ["MergeEvent", "MergeStep", "PreparedMaps", "Placement", "PlacedGroup", "MethodResult",
-           "Method", "Emit", "tree_result"]
+           "Method", "Emit", "tree_result", "common_confidence"]
 
 
 @dataclass(frozen=True)
@@ -211,3 +211,59 @@ def tree_result(maps: PreparedMaps, transforms: list, conf: list, tree: list, re
             residual=residual[k] if transforms[k] is not None else None))
     return MethodResult(tuple(placements), tuple(tree), tuple(placed_order), plan, tuple(steps),
                         scans, virtual, seconds=seconds, groups=tuple(placed_groups))
+
+
+def _oriented(tree, root: int) -> list:
+    """The edges of ``tree`` as ``(parent, child)`` pairs, walked outwards from ``root``."""
+    near: dict = {}
+    for a, b in tree:
+        near.setdefault(a, []).append(b)
+        near.setdefault(b, []).append(a)
+    out, seen, todo = [], {root}, [root]
+    while todo:
+        p = todo.pop(0)
+        for q in sorted(near.get(p, ())):
+            if q not in seen:
+                seen.add(q)
+                out.append((p, q))
+                todo.append(q)
+    return out
+
+
+def common_confidence(grids, transforms, tree, groups, reference: int, seed: int,
+                      consensus=None, max_false_merge: float = 0.01):
+    """Each placed map's confidence from the consensus method's test (``exp(-nfa)`` of the link
+    that placed it, 0..1), for a method whose own score is on a scale of its own (the peers',
+    the paper's share of walls): the one scale of every method's report. ``consensus`` is the
+    test's :class:`~fusionkit.methods.consensus.ConsensusConfig` (None: its defaults)."""
+    from .consensus import ConsensusConfig, placement_confidence, prepare_maps
+    cfg = consensus if consensus is not None else ConsensusConfig()
+    cfg = replace(cfg, max_false_merge=max_false_merge, use_scans=False)
+    n = len(grids)
+    group_of, group_tf, group_conf, group_trees = groups
+    # each link judged from the map nearer its group's root (a peer's own tree may be rooted
+    # elsewhere, map-merge's at the centre map): the confidence goes to the map it placed
+    links = [(p, q, transforms) for p, q in _oriented(tree, reference)]
+    for g_tree in group_trees:
+        root = min(k for edge in g_tree for k in edge)
+        links += [(p, q, group_tf) for p, q in _oriented(g_tree, root)]
+    links = [(p, q, frame) for p, q, frame in links if frame[p] is not None and frame[q] is not None]
+    if not links:
+        return [1.0 if k == reference else 0.0 for k in range(n)], groups
+    needed = sorted({k for p, q, _ in links for k in (p, q)})
+    built = prepare_maps([grids[k] for k in needed], config=cfg)
+    index = dict(zip(needed, built))
+    conf = [0.0] * n
+    conf[reference] = 1.0
+    g_conf = list(group_conf)
+    for p, q, frame in links:
+        c = placement_confidence(index[p], index[q], frame[p].inverse @ frame[q], config=cfg,
+                                 seed=seed + q)
+        if frame is transforms:
+            conf[q] = c
+        else:
+            g_conf[q] = c
+    for k in range(n):
+        if group_of[k] and group_tf[k] is not None and k == min(m for m in range(n) if group_of[m] == group_of[k]):
+            g_conf[k] = 1.0
+    return conf, (group_of, group_tf, g_conf, group_trees)

@@ -14,12 +14,12 @@ from __future__ import annotations
 import importlib
 import itertools
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
 from ...transform import Transform2D
-from ..base import MergeEvent, MergeStep, PreparedMaps, tree_result
+from ..base import MergeEvent, MergeStep, PreparedMaps, common_confidence, tree_result
 
 __all__ = ["PEERS", "PeerSettings", "PeerMethod"]
 
@@ -35,7 +35,8 @@ PEERS = {
 @dataclass(frozen=True)
 class PeerSettings:
     """A peer's settings: the seed of its random steps, and what the common confidence test
-    (the consensus method's, :func:`_common_confidence`) needs: its settings and the risk."""
+    (the consensus method's, :func:`~fusionkit.methods.base.common_confidence`) needs: its
+    settings and the risk."""
 
     seed: int = 0
     consensus: object = None
@@ -88,59 +89,6 @@ def _groups_from_pairs(n: int, transforms: list, accepted: dict):
             group[k], g_t[k], g_c[k] = number, t_g[k], c_g[k]
         trees.append(tuple(tree_g))
     return group, g_t, g_c, trees
-
-
-def _oriented(tree, root: int) -> list:
-    """The edges of ``tree`` as ``(parent, child)`` pairs, walked outwards from ``root``."""
-    near: dict = {}
-    for a, b in tree:
-        near.setdefault(a, []).append(b)
-        near.setdefault(b, []).append(a)
-    out, seen, todo = [], {root}, [root]
-    while todo:
-        p = todo.pop(0)
-        for q in sorted(near.get(p, ())):
-            if q not in seen:
-                seen.add(q)
-                out.append((p, q))
-                todo.append(q)
-    return out
-
-
-def _common_confidence(grids, transforms, tree, groups, reference: int, settings: PeerSettings):
-    """Each placed map's confidence from the consensus method's test (``exp(-nfa)`` of the link
-    that placed it, 0..1), for a peer whose own score is on a scale of its own."""
-    from ..consensus import ConsensusConfig, placement_confidence, prepare_maps
-    cfg = settings.consensus if settings.consensus is not None else ConsensusConfig()
-    cfg = replace(cfg, max_false_merge=settings.max_false_merge, use_scans=False)
-    n = len(grids)
-    group_of, group_tf, group_conf, group_trees = groups
-    # each link judged from the map nearer its group's root (a peer's own tree may be rooted
-    # elsewhere, map-merge's at the centre map): the confidence goes to the map it placed
-    links = [(p, q, transforms) for p, q in _oriented(tree, reference)]
-    for g_tree in group_trees:
-        root = min(k for edge in g_tree for k in edge)
-        links += [(p, q, group_tf) for p, q in _oriented(g_tree, root)]
-    links = [(p, q, frame) for p, q, frame in links if frame[p] is not None and frame[q] is not None]
-    if not links:
-        return [1.0 if k == reference else 0.0 for k in range(n)], groups
-    needed = sorted({k for p, q, _ in links for k in (p, q)})
-    built = prepare_maps([grids[k] for k in needed], config=cfg)
-    index = dict(zip(needed, built))
-    conf = [0.0] * n
-    conf[reference] = 1.0
-    g_conf = list(group_conf)
-    for p, q, frame in links:
-        c = placement_confidence(index[p], index[q], frame[p].inverse @ frame[q], config=cfg,
-                                 seed=settings.seed + q)
-        if frame is transforms:
-            conf[q] = c
-        else:
-            g_conf[q] = c
-    for k in range(n):
-        if group_of[k] and group_tf[k] is not None and k == min(m for m in range(n) if group_of[m] == group_of[k]):
-            g_conf[k] = 1.0
-    return conf, (group_of, group_tf, g_conf, group_trees)
 
 
 def _peer(method: str, grids, reference: int, seed: int, emit):
@@ -214,7 +162,8 @@ class PeerMethod:
         seconds = {"align": time.perf_counter() - t0}
         # confidence on the one scale of every method: the consensus test of each link placed
         t1 = time.perf_counter()
-        conf, groups = _common_confidence(grids, transforms, tree, groups, maps.reference, settings)
+        conf, groups = common_confidence(grids, transforms, tree, groups, maps.reference,
+                                         settings.seed, settings.consensus, settings.max_false_merge)
         seconds["confidence"] = time.perf_counter() - t1
         return tree_result(maps, transforms, conf, tree, reasons, [0] * n, counts, steps,
                            tuple(maps.scans), tuple(False for _ in range(n)), seconds, groups=groups)
