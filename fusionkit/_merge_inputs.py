@@ -28,7 +28,11 @@ def load_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[OccupancyGrid]
     for p in paths:
         grids.append(load_map(p))
         sp = scans_path_for(p)
-        scans.append(load_scans(sp) if sp.is_file() else None)
+        try:
+            scans.append(load_scans(sp) if sp.is_file() else None)
+        except InputError as e:   # the scans are optional: say the other way out too
+            raise InputError(f"{e}; or move it away from {os.path.basename(p)}: a map without "
+                             f"scans is placed by its walls") from None
     return grids, scans
 
 

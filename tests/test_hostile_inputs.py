@@ -287,6 +287,16 @@ def test_hostile_input_is_one_line_exit_2_and_changes_nothing(folder, capsys, se
     assert _snapshot(folder) == before  # no input changed, nothing written
 
 
+def test_a_scan_log_that_cannot_be_read_says_the_map_merges_without_it(folder, capsys):
+    """The scans beside a map are optional: the error said only how to write them again, not
+    that moving the file away lets the map be placed by its walls."""
+    code = main(_merge_with_scans(b"poses ranges angle_min\n1 2 3\n")(folder))
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "B.scans.npz" in err and "or move it away from B.yaml: a map without scans is placed " \
+        "by its walls" in err, err
+
+
 def test_a_write_error_is_one_line_and_leaves_nothing(folder, capsys, monkeypatch):
     """A read-only or full output folder (as root, permissions do not stop writes, so the
     refusal of the file system is injected)."""
