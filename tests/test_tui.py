@@ -862,6 +862,26 @@ async def test_a_map_removed_from_the_selection_is_no_longer_previewed(in_root):
         assert "robot_" not in str(maps.query_one("#info").render())
 
 
+async def test_the_info_line_of_a_map_without_scans_is_shown_whole_at_80_by_24(tmp_path,
+                                                                             monkeypatch):
+    """At 80 x 24 the line was cut after two lines, mid-parenthesis ("(placed by its walls;")."""
+    import shutil
+    real = Path(__file__).parent.parent / "maps" / "real"
+    for suffix in (".yaml", ".pgm"):
+        shutil.copy(real / f"izs_campus_outdoor{suffix}", tmp_path)
+    monkeypatch.chdir(tmp_path)
+    app = make_app(["izs_campus_outdoor.yaml"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        info = app.main.maps.query_one("#info")
+        await until(pilot, lambda: "scans: none" in str(info.render()))
+        await pilot.pause()
+        text = str(info.render())
+        assert text.endswith("spectral-pso casts virtual scans)")
+        # the widest the text can be: it needs three lines, and has them
+        assert len(text) > 2 * info.size.width and info.size.height == 3, (info.size, text)
+
+
 _STUCK_MERGE = """
 import pathlib, threading, sys
 import fusionkit_tui.runner as runner

@@ -61,7 +61,7 @@ class MapsPane(Vertical):
     }
     MapsPane #info {
         height: auto;
-        max-height: 2;
+        max-height: 3;   /* a map with no scans says how it is placed: 3 lines at 80 columns */
         color: $text-muted;
     }
     """
