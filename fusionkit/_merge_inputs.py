@@ -16,7 +16,7 @@ from .resample import canvas_for, resample, transformed_bounds
 from .scanlog import ScanLog, load_scans, scans_path_for
 from .transform import Transform2D
 
-__all__ = ["load_inputs"]
+__all__ = ["load_inputs", "scans_misfit"]
 
 
 def load_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[OccupancyGrid], list[ScanLog | None]]:
@@ -120,3 +120,39 @@ def _unusable(grid: OccupancyGrid) -> str:
     if not grid.occupied_mask().any():
         return "it holds no wall (occupied cell) to place it by"
     return ""
+
+
+#: Scans are refused as another map's when fewer of their end points on the map's known cells
+#: fall on or beside its walls than this share and than SCAN_FIT_LIFT times chance. A map's own
+#: scans: 68-100 % and 6-37 times chance (the four real logs split into three sessions each, the
+#: simulated demo run); another session's or robot's: 1-32 % and 0.3-2.7 times chance.
+SCAN_FIT_SHARE = 0.4
+SCAN_FIT_LIFT = 3.0
+
+
+def scans_misfit(grid: OccupancyGrid, log: ScanLog, *, scans: int = 200) -> str:
+    """Why ``log`` cannot be ``grid``'s own scans (its end points miss the map's walls), or ""."""
+    from scipy.ndimage import binary_dilation
+
+    if log.n_scans == 0 or grid.data.size == 0:
+        return ""
+    idx = np.unique(np.linspace(0, log.n_scans - 1, min(scans, log.n_scans)).round().astype(np.int64))
+    pts = log.endpoints(idx)
+    if len(pts) == 0:
+        return ""                      # no beam returned: nothing to judge them by
+    rows, cols = grid.world_to_cell(pts)
+    r, c = np.floor(rows).astype(np.int64), np.floor(cols).astype(np.int64)
+    inside = (r >= 0) & (r < grid.rows) & (c >= 0) & (c < grid.cols)
+    r, c = r[inside], c[inside]
+    known = grid.known_mask()
+    on_known = known[r, c]
+    near_wall = binary_dilation(grid.occupied_mask(), np.ones((3, 3), bool))
+    if on_known.sum() < 50:
+        return (f"{int(on_known.sum())} of its {len(pts)} scan end points (of {len(idx)} scans) "
+                f"fall on the map's known cells")
+    share = float(near_wall[r, c][on_known].mean())
+    chance = float(near_wall[known].mean())
+    if share >= SCAN_FIT_SHARE or share >= SCAN_FIT_LIFT * chance:
+        return ""
+    return (f"{100 * share:.0f}% of its scan end points on the map's known cells fall on or "
+            f"beside a wall, where {100 * chance:.0f}% would by chance")

@@ -145,6 +145,32 @@ def test_merge_refuses_a_single_map_and_mismatched_scans(sim):
               config=MergeConfig(method="spectral-pso"))
 
 
+def test_scans_of_another_robot_are_refused_naming_them(sim, run_dir, tmp_path, capsys):
+    """Another robot's scan log beside a map (or given for it) was used without a word: its end
+    points miss the map's walls, and the paper's method placed the map by them."""
+    grids, scans = [r.grid for r in sim.robots], [r.scans for r in sim.robots]
+    with pytest.raises(InputError, match=r"scans\[1\] \(of map robot_2\): \d+% of its scan end "
+                                         r"points .* not this map's scans"):
+        merge(grids, scans=[scans[0], scans[2], scans[1]])
+    # from files: the scans beside robot_2.yaml are robot_3's
+    import shutil
+    for k in (1, 2):
+        for suffix in (".yaml", ".pgm"):
+            shutil.copy(run_dir / f"robot_{k}{suffix}", tmp_path)
+    shutil.copy(run_dir / "robot_1.scans.npz", tmp_path)
+    shutil.copy(run_dir / "robot_3.scans.npz", tmp_path / "robot_2.scans.npz")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    code = main(["merge", str(tmp_path / "robot_1.yaml"), str(tmp_path / "robot_2.yaml"),
+                 "-o", str(tmp_path / "m.yaml")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert f"{tmp_path / 'robot_2.scans.npz'} (the scans of {tmp_path / 'robot_2.yaml'})" in err
+    assert "give its own, or none" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
+    # its own scans are taken
+    assert merge(grids, scans=scans, config=MergeConfig(seed=1)).placements[1].merged
+
+
 def test_cli_merge_writes_the_contract_report_and_evaluate_agrees(run_dir, sim, capsys):
     inputs = [str(run_dir / f"robot_{k}.yaml") for k in (1, 2, 3)]
     out = run_dir / "merged.yaml"
