@@ -134,8 +134,9 @@ def scans_misfit(grid: OccupancyGrid, log: ScanLog, *, scans: int = 200) -> str:
     """Why ``log`` cannot be ``grid``'s own scans (its end points miss the map's walls), or ""."""
     from scipy.ndimage import binary_dilation
 
-    if log.n_scans == 0 or grid.data.size == 0:
-        return ""
+    known = grid.known_mask()
+    if log.n_scans == 0 or not known.any() or not grid.occupied_mask().any():
+        return ""                      # nothing to judge them by: the map's own reason is said
     idx = np.unique(np.linspace(0, log.n_scans - 1, min(scans, log.n_scans)).round().astype(np.int64))
     pts = log.endpoints(idx)
     if len(pts) == 0:
@@ -144,7 +145,6 @@ def scans_misfit(grid: OccupancyGrid, log: ScanLog, *, scans: int = 200) -> str:
     r, c = np.floor(rows).astype(np.int64), np.floor(cols).astype(np.int64)
     inside = (r >= 0) & (r < grid.rows) & (c >= 0) & (c < grid.cols)
     r, c = r[inside], c[inside]
-    known = grid.known_mask()
     on_known = known[r, c]
     near_wall = binary_dilation(grid.occupied_mask(), np.ones((3, 3), bool))
     if on_known.sum() < 50:

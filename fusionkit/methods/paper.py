@@ -208,8 +208,8 @@ class SpectralPSO:
             to_ref = transforms[ref].inverse
             transforms = [None if t is None else to_ref @ t for t in transforms]
         # the report's confidence on the one scale of every method: the consensus test of the
-        # link that placed each map (its share of walls, 1.00 on a placement turned 176 degrees
-        # in a symmetric room, said how much agreed, not how sure a placement is)
+        # link that placed each map (its share of walls says how much agreed, not how sure the
+        # placement is)
         t1 = time.perf_counter()
         tested, _ = common_confidence(grids, transforms, accepted_order,
                                       ([None] * n, [None] * n, [0.0] * n, []), ref, config.seed,
