@@ -169,6 +169,11 @@ def test_scans_of_another_robot_are_refused_naming_them(sim, run_dir, tmp_path, 
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     # its own scans are taken
     assert merge(grids, scans=scans, config=MergeConfig(seed=1)).placements[1].merged
+    # a map with no known cell gives nothing to judge scans by: it is left out with its reason
+    from fusionkit.grid import OccupancyGrid
+    blank = OccupancyGrid(np.full_like(grids[1].data, -1), grids[1].resolution, grids[1].origin, "b")
+    left = merge([grids[0], blank], scans=scans[:2]).placements[1]
+    assert not left.merged and "no known cell" in left.reason, left.reason
 
 
 def test_cli_merge_writes_the_contract_report_and_evaluate_agrees(run_dir, sim, capsys):
