@@ -95,7 +95,7 @@ def check() -> None:
     outputs are written, so that a Ctrl-C that came while modules loaded is not lost and the
     old outputs are not replaced."""
     exc = swallowed()
-    if exc is not None and _watching and all(signal.getsignal(s) is _raise for s in _SIGNALS):
+    if exc is not None and _watching and _in_place():
         _received.clear()
         raise exc
 
@@ -126,8 +126,7 @@ def _unraisable(hook):
     again, should it land in such a place once more); anything else goes to ``hook``."""
     def unraisable(info):
         exc = info.exc_value
-        if isinstance(exc, KeyboardInterrupt) and all(signal.getsignal(s) is _raise
-                                                      for s in _SIGNALS):
+        if isinstance(exc, KeyboardInterrupt) and _in_place():
             if _received:   # sent again: kept when it comes, not now (a check would raise it
                 _received.pop()   # while the signal is on its way, which then finds an exit)
             threading.Timer(_AGAIN_S, os.kill, (os.getpid(), signal_of(exc))).start()
@@ -137,12 +136,29 @@ def _unraisable(hook):
     return unraisable
 
 
+#: The process was started with SIGHUP ignored (``nohup``: the run must outlive the terminal or
+#: the SSH link that started it), as it was when this module was first imported
+_HUP_IGNORED = hasattr(signal, "SIGHUP") and signal.getsignal(signal.SIGHUP) == signal.SIG_IGN
+
+
+def _kept_ignored(s: int) -> bool:
+    """A SIGHUP the process was started ignoring stays ignored."""
+    return _HUP_IGNORED and s == signal.SIGHUP
+
+
+def _in_place() -> bool:
+    """Whether :func:`install`'s handlers hold every signal they take."""
+    return all(signal.getsignal(s) is _raise or _kept_ignored(s) for s in _SIGNALS)
+
+
 def install() -> None:
-    """Turn SIGINT and SIGTERM into exceptions (main thread only; elsewhere a no-op)."""
+    """Turn SIGINT, SIGTERM and SIGHUP into exceptions (main thread only; elsewhere a no-op);
+    a SIGHUP ignored at start (``nohup``) stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         return
     for s in _SIGNALS:
-        signal.signal(s, _raise)
+        if not _kept_ignored(s):
+            signal.signal(s, _raise)
     if not getattr(sys.unraisablehook, "installed", False):
         sys.unraisablehook = _unraisable(sys.unraisablehook)
 
@@ -162,7 +178,7 @@ def deferred() -> Iterator[None]:
     """
     global _deferring
     active = (threading.current_thread() is threading.main_thread()
-              and all(signal.getsignal(s) is _raise for s in _SIGNALS))
+              and _in_place())
     if not active:
         yield
         return

@@ -455,6 +455,20 @@ def test_a_signalled_command_exits_130_or_143_with_one_line_and_its_outputs_unch
     assert _files(earlier_run) == before
 
 
+def test_a_command_started_under_nohup_runs_through_a_hang_up(tmp_path):
+    """``nohup fusionkit bench ... &`` over SSH: the hang-up the program was started to ignore
+    ended it with exit 129 and nothing written, as its handler took the signal back."""
+    out = tmp_path / "run"
+    env = {**os.environ, "NUMBA_THREADING_LAYER": "threadsafe"}
+    proc = subprocess.run(
+        [sys.executable, "-c", _CLI, "0", "SIGHUP", "simulate", "--robots", "2", "--poses", "40",
+         "--seed", "2", "--out", str(out), "--quiet"], capture_output=True, text=True,
+        timeout=300, env=env, cwd=ROOT,
+        preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))   # as nohup starts it
+    assert proc.returncode == 0, proc.stderr
+    assert (out / "robot_1.yaml").is_file() and (out / "truth.json").is_file()
+
+
 def test_ctrl_c_during_start_up_is_one_line_and_exit_130(monkeypatch, capsys):
     import importlib
 
