@@ -164,7 +164,7 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
                   config: ConsensusConfig = ConsensusConfig(), reference: int = 0, seed: int = 0,
                   virtual_poses: int = 1500,
                   callback: Callable[[str, int, int, tuple | None], None] | None = None,
-                  executor: Executor | None = None) -> MapsResult:
+                  executor: Executor | None = None, names: Sequence[str] | None = None) -> MapsResult:
     """Place every map in the reference map's frame (or leave it out when not sure).
 
     Parameters
@@ -188,6 +188,8 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
     executor : fusionkit.executor.Executor, optional
         Where the pairs are estimated (default: the one set by
         :func:`fusionkit.executor.using`, else ``config.threads`` threads here).
+    names : sequence of str, optional
+        What the reasons call each map (default: "map K of those given", K from 1).
 
     Maps are prepared on ``config.threads`` threads (the kernels release the interpreter) and
     pairs estimated on the executor; the result does not depend on either. With
@@ -258,7 +260,7 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
         seconds["pairs"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         boxes = [corners(ix) for ix in indexes]
-        graph = solve_graph(pairs, indexes, reference, config, boxes)
+        graph = solve_graph(pairs, indexes, reference, config, boxes, names)
         seconds["graph"] = time.perf_counter() - t0
         left = [k for k in range(n) if graph.transforms[k] is None]
         if config.fallback and left:
@@ -266,7 +268,7 @@ def estimate_maps(grids: Sequence[OccupancyGrid], scans: Sequence[ScanLog | None
             t0 = time.perf_counter()
             redo = [(i, j) for (i, j), p in pairs.items() if (i in left or j in left) and not p.accepted]
             pairs.update(estimate(redo, exhaustive=True))
-            graph = solve_graph(pairs, indexes, reference, config, boxes)
+            graph = solve_graph(pairs, indexes, reference, config, boxes, names)
             seconds["fallback"] = time.perf_counter() - t0
         for ix in indexes:
             forget_pairs(ix)

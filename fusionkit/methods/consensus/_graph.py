@@ -118,10 +118,12 @@ def _witnessed(witness: dict, i: int, j: int):
 
 
 def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig,
-                boxes: list) -> GraphResult:
+                boxes: list, names=None) -> GraphResult:
     """Place every map in the reference's frame from the pairwise results ``pairs``
-    (``(i, j) -> PairResult`` for ``i < j``, transforms j -> i)."""
+    (``(i, j) -> PairResult`` for ``i < j``, transforms j -> i); the reasons call map ``k``
+    ``names[k]`` (default: "map k+1 of those given")."""
     n = len(indexes)
+    label = (lambda k: names[k]) if names is not None else (lambda k: f"map {k + 1} of those given")
     res = indexes[reference].resolution
     tol = cfg.loop_cells * res
     # weight: the evidence of the placement (agreeing walls net of misfits)
@@ -297,7 +299,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
             root = min(m for m in range(n) if group[m] == group[k])
             others = len([m for m in range(n) if group[m] == group[k]]) - 1
             frame = ("its own frame (the group's first map)" if root == k else
-                     f"the frame of map {root + 1} of those given (the group's first)")
+                     f"the frame of the group's first map, {label(root)}")
             reasons.append(f"no confident link joins it to the reference's maps; it is kept in "
                            f"group {group[k]} with {others} other map{'s' if others != 1 else ''}, "
                            f"fused in {frame}")
@@ -322,7 +324,7 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                 other = best.b if best.a == k else best.a
                 # with three maps or more, which pair the words are about
                 reasons.append(best.reason if n == 2 else
-                               f"{best.reason} (against map {other + 1} of those given, its surest pair)")
+                               f"{best.reason} (against {label(other)}, its surest pair)")
             else:
                 reasons.append("no confident placement against any other map")
     return GraphResult(tuple(transforms), tuple(float(c) for c in conf), tuple(tree),

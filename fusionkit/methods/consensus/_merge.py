@@ -54,7 +54,8 @@ class ConsensusMethod:
             emit(MergeEvent(stage, step, total, label, pair))
 
         res = estimate_maps(grids, scans, config=settings.consensus, reference=ref,
-                            seed=settings.seed, virtual_poses=settings.virtual_poses, callback=cb)
+                            seed=settings.seed, virtual_poses=settings.virtual_poses, callback=cb,
+                            names=list(names))
         g = res.graph
         transforms, conf = list(g.transforms), list(g.confidences)
         tree, reasons = list(g.tree), list(g.reasons)
