@@ -16,7 +16,7 @@ from .resample import canvas_for, resample, transformed_bounds
 from .scanlog import ScanLog, load_scans, scans_path_for
 from .transform import Transform2D
 
-__all__ = ["load_inputs", "scans_misfit"]
+__all__ = ["load_inputs", "scans_misfit", "check_scans", "scans_labels"]
 
 
 def load_inputs(paths: Sequence[str | os.PathLike]) -> tuple[list[OccupancyGrid], list[ScanLog | None]]:
@@ -156,3 +156,18 @@ def scans_misfit(grid: OccupancyGrid, log: ScanLog, *, scans: int = 200) -> str:
         return ""
     return (f"{100 * share:.0f}% of its scan end points on the map's known cells fall on or "
             f"beside a wall, where {100 * chance:.0f}% would by chance")
+
+
+def scans_labels(paths) -> list[str]:
+    """How an error names the scan log of each map file: its path and its map's."""
+    return [f"{scans_path_for(p)} (the scans of {os.fspath(p)})" for p in paths]
+
+
+def check_scans(grids, scans, labels) -> None:
+    """Refuse, naming it by ``labels``, a scan log that is not its map's own
+    (:func:`scans_misfit`)."""
+    for grid, log, label in zip(grids, scans, labels):
+        why = scans_misfit(grid, log) if log is not None else ""
+        if why:   # another robot's scans, or scans of another frame, used without a word
+            raise InputError(f"{label}: {why}: these are not this map's scans; give its own, or "
+                             f"none (a map without scans is placed by its walls)")

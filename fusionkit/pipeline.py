@@ -38,8 +38,8 @@ from .methods.base import MergeEvent, MergeStep, PreparedMaps
 from .methods.consensus import ConsensusConfig
 from .pairing import FusionPlan
 from .pso import PSOConfig, _is_int
-from ._merge_inputs import _same_resolution, _unusable, load_inputs, scans_misfit
-from .scanlog import ScanLog, scans_path_for
+from ._merge_inputs import _same_resolution, _unusable, check_scans, load_inputs, scans_labels
+from .scanlog import ScanLog
 from .transform import Transform2D
 
 __all__ = ["MergeConfig", "MergeEvent", "MapPlacement", "MapGroup", "MergeStep", "MergeResult",
@@ -396,13 +396,8 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
         raise InputError(f"{ref_name}: the reference map has no wall (no occupied "
                          "cell), so no map can be placed in its frame; choose another map as the "
                          "reference")
-    for k, log in enumerate(scans):
-        why = scans_misfit(grids[k], log) if log is not None else ""
-        if why:   # another robot's scans, or scans of another frame, used without a word
-            label = (f"{scans_path_for(maps[k])} (the scans of {os.fspath(maps[k])})"
-                     if grids is not maps else f"scans[{k}] (of map {names[k]})")
-            raise InputError(f"{label}: {why}: these are not this map's scans; give its own, or "
-                             f"none (a map without scans is placed by its walls)")
+    check_scans(grids, scans, scans_labels(maps) if grids is not maps else
+                [f"scans[{k}] (of map {names[k]})" for k in range(len(grids))])
     originals = list(grids)
     grids = _same_resolution(originals, config.reference)
 

@@ -882,6 +882,33 @@ async def test_the_info_line_of_a_map_without_scans_is_shown_whole_at_80_by_24(t
         assert len(text) > 2 * info.size.width and info.size.height == 3, (info.size, text)
 
 
+async def test_a_merge_refused_for_another_robots_scans_says_so_whole_naming_the_file(
+        run_root, tmp_path, monkeypatch):
+    """The line was cut after 80 columns ("...on the map's kno…") and named the scans
+    "scans[1] (of map robot_2)", where the command line names the file."""
+    import shutil
+    for k in (1, 2):
+        for suffix in (".yaml", ".pgm"):
+            shutil.copy(run_root / "run" / f"robot_{k}{suffix}", tmp_path)
+    shutil.copy(run_root / "run" / "robot_1.scans.npz", tmp_path)
+    shutil.copy(run_root / "run" / "robot_3.scans.npz", tmp_path / "robot_2.scans.npz")
+    monkeypatch.chdir(tmp_path)
+    app = make_app(["robot_1.yaml", "robot_2.yaml"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        detail = app.main.run_panel.query_one("#detail")
+        await pilot.press("ctrl+r")
+        await until(pilot, lambda: "failed:" in str(detail.render()))
+        await pilot.pause()
+        text = str(detail.render())
+        assert text.startswith("failed: robot_2.scans.npz (the scans of robot_2.yaml): "), text
+        assert text.endswith("(a map without scans is placed by its walls)"), text
+        assert detail.size.height >= 2 and len(text) <= detail.size.height * detail.size.width
+        await pilot.press("ctrl+r")   # the next run starts on one line again
+        await pilot.pause()
+        await until(pilot, lambda: not app.main.merging)
+
+
 _STUCK_MERGE = """
 import pathlib, threading, sys
 import fusionkit_tui.runner as runner

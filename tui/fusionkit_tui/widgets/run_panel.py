@@ -75,6 +75,12 @@ class RunPanel(Vertical):
         text-wrap: nowrap;
         text-overflow: ellipsis;
     }
+    RunPanel #detail.stopped {
+        /* why a merge failed, whole: what to do is at its end */
+        height: auto;
+        max-height: 6;
+        text-wrap: wrap;
+    }
     """
 
     def __init__(self, *, id: str | None = None) -> None:
@@ -179,7 +185,9 @@ class RunPanel(Vertical):
         """Before any run."""
         self.query_one("#stages", Static).update(self._stages(""))
         self.query_one(ProgressBar).update(progress=0)
-        self.query_one("#detail", Static).update("not run yet: select two or more maps and press r")
+        detail = self.query_one("#detail", Static)
+        detail.remove_class("stopped")
+        detail.update("not run yet: select two or more maps and press r")
         self.query_one("#left", Static).update("")
 
     def begin(self, maps: int, iterations: int, method: str = "spectral-pso") -> None:
@@ -204,7 +212,9 @@ class RunPanel(Vertical):
         self._legend()
         self.query_one(ProgressBar).update(progress=0)
         self.query_one("#stages", Static).update(self._stages(self._stage_list[0][0]))
-        self.query_one("#detail", Static).update(f"merging {maps} maps; escape cancels")
+        detail = self.query_one("#detail", Static)
+        detail.remove_class("stopped")
+        detail.update(f"merging {maps} maps; escape cancels")
         self.query_one("#left", Static).update("")
 
     def update_progress(self, ev: MergeProgress) -> None:
@@ -274,6 +284,8 @@ class RunPanel(Vertical):
         self.query_one("#stages", Static).update(self._stages(self._stage or self._stage_list[0][0],
                                                               *self._where,
                                                               stopped=True))
-        self.query_one("#detail", Static).update(Text(why, style="bold"))
+        detail = self.query_one("#detail", Static)
+        detail.add_class("stopped")
+        detail.update(Text(why, style="bold"))
         self.query_one("#left", Static).update("press r to run again" if ended else
                                                "r runs again once it has stopped")
