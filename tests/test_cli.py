@@ -291,6 +291,29 @@ def test_a_new_run_into_a_folder_takes_the_merges_of_the_old_robots_with_them(tm
         "robot_2.scans.npz", "robot_2.yaml", "truth.json", "world.pgm", "world.yaml"]
 
 
+def test_two_maps_whose_paths_differ_only_where_clipped_print_apart():
+    """The table clipped each path to its last 28 characters: two runs' robot_1.yaml of the
+    same floor printed as the same map."""
+    from fusionkit.cli.merge import format_placements
+    from fusionkit.pipeline import MapPlacement, MergeConfig
+    from fusionkit.transform import Transform2D
+
+    class Result:
+        placements = [MapPlacement(0, "a", True, Transform2D.identity(), 1.0),
+                      MapPlacement(1, "b", False, None, 0.0, reason="why")]
+        fusion_order = ()
+        config = MergeConfig()
+        seconds = {"total": 0.1}
+
+    names = ["site_alpha/session_morning_floor2/robot_1.yaml",
+             "site_beta/session_morning_floor2/robot_1.yaml"]
+    lines = format_placements(Result, names).splitlines()
+    assert lines[1].startswith(names[0] + " ") and lines[2].startswith(names[1] + " ")
+    assert lines[0].index("merged") == lines[1].index("yes") == lines[2].index("no")
+    short = format_placements(Result, ["a.yaml", "runs/b.yaml"]).splitlines()   # as before
+    assert short[1].startswith("a.yaml" + " " * 22 + " yes")
+
+
 def test_a_number_that_rounds_to_zero_prints_as_0_not_minus_0():
     """evaluate printed "-0.0" for a true heading of -1e-9 rad."""
     from fusionkit.labels import fixed

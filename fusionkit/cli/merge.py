@@ -219,14 +219,21 @@ def run_truth(inputs) -> list[Path]:
 
 def format_placements(result, names) -> str:
     """A table of each map's placement, for the terminal."""
-    lines = [f"{'map':<28} {'merged':<7} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'theta (deg)':>11}"]
+    width = 28
+    shown = [clip_left(str(n), width) for n in names]
+    if len(set(shown)) < len({str(n) for n in names}):
+        # two paths that differ only where they were clipped printed as the same map: whole
+        shown = [str(n) for n in names]
+        width = max(len(n) for n in shown)
+    lines = [f"{'map':<{width}} {'merged':<7} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'theta (deg)':>11}"]
     for p in result.placements:
-        name = clip_left(str(names[p.index]), 28)
+        name = shown[p.index]
         if p.transform is None:
-            lines.append(f"{name:<28} {'no':<7} {p.confidence:5.2f} {'-':>8} {'-':>8} {'-':>11}  {p.reason}")
+            lines.append(f"{name:<{width}} {'no':<7} {p.confidence:5.2f} {'-':>8} {'-':>8} {'-':>11}  "
+                         f"{p.reason}")
         else:
             t = p.transform
-            lines.append(f"{name:<28} {'yes':<7} {p.confidence:5.2f} {fixed(t.x, 8, 2)} "
+            lines.append(f"{name:<{width}} {'yes':<7} {p.confidence:5.2f} {fixed(t.x, 8, 2)} "
                          f"{fixed(t.y, 8, 2)} {fixed(math.degrees(t.theta), 11, 1)}")
     order = ", ".join(f"{names[a]} + {names[b]}" for a, b in result.fusion_order) or "(none)"
     lines.append(f"fusion order: {order}")
