@@ -152,6 +152,27 @@ async def test_the_tui_result_names_a_maps_group(two_buildings, tmp_path):
         assert [str(table.get_row_at(k)[1]) for k in range(4)] == ["yes", "group 1", "yes", "group 1"]
 
 
+@pytest.mark.parametrize("order", [(0, 2, 3, 1), (0, 1, 2, 3)], ids=["apart", "together"])
+def test_map_merge_keeps_every_linked_set_whatever_the_order(two_buildings, order):
+    """Two windows of each of two floors: map-merge kept its largest set of matched maps alone.
+    Given A, C, D, B (two sets of two), it kept C and D and left B out though B links to the
+    reference A; given A, B, C, D, it merged B and dropped C and D with no group."""
+    one, two = two_buildings
+    maps = [one.a, one.b, two.a, two.b]
+    result = merge([maps[k] for k in order], config=MergeConfig(method="map-merge"))
+    p = {order[k]: q for k, q in enumerate(result.placements)}
+    assert p[0].merged and p[1].merged and not p[2].merged and not p[3].merged
+    d, r = placement_error(p[1].transform, one.truth, one.b)
+    assert d < 3 * one.a.resolution and r < math.radians(2.0)
+    assert p[2].group == p[3].group == 1
+    first, second = sorted((2, 3), key=order.index)   # the group is in its first map's frame
+    t = p[second].group_transform if second == 3 else p[second].group_transform.inverse
+    d, r = placement_error(t, two.truth, two.b)
+    assert d < 3 * two.a.resolution and r < math.radians(2.0)
+    (group,) = result.groups
+    assert sorted(group.members) == sorted(order.index(k) for k in (2, 3))
+
+
 @pytest.mark.parametrize("method", ["map-merge", "map-merge-shipped"])
 def test_map_merges_largest_group_without_the_reference_is_a_group(two_buildings, method):
     """A map of another building first, then two windows of one floor: map-merge's largest

@@ -91,35 +91,92 @@ def _groups_from_pairs(n: int, transforms: list, accepted: dict):
     return group, g_t, g_c, trees
 
 
+#: map-merge's matcher threshold (its node's ``estimation_confidence``, OpenCV's ``conf_thresh``)
+MAP_MERGE_CONFIDENCE = 1.0
+
+
+def _linked_sets(conf: np.ndarray, threshold: float) -> list[list[int]]:
+    """Every set of two maps or more that pairs of confidence >= ``threshold`` join, the
+    largest first (ties: the one holding the first map given)."""
+    n = conf.shape[0]
+    root = list(range(n))
+
+    def find(k):
+        while root[k] != k:
+            root[k] = root[root[k]]
+            k = root[k]
+        return k
+
+    for i in range(n):
+        for j in range(n):
+            if i != j and conf[i, j] >= threshold:
+                root[find(i)] = find(j)
+    sets: dict = {}
+    for k in range(n):
+        sets.setdefault(find(k), []).append(k)
+    return sorted((m for m in sets.values() if len(m) >= 2), key=lambda m: (-len(m), m[0]))
+
+
+def _map_merge(mod, method: str, chaining: str, grids, reference: int, seed: int, emit):
+    """map-merge on every set of maps its matcher links, not only its largest: the reference's
+    set is merged into the reference's frame, each other set kept as a group in its first
+    map's frame (its node keeps the largest set alone, and which of two sets of one size it
+    kept followed the order the maps were given in)."""
+    n = len(grids)
+    emit(MergeEvent("align", 0, 1, method))
+    est = mod.estimate_maps(grids, chaining=chaining, reference=reference, seed=seed,
+                            confidence=MAP_MERGE_CONFIDENCE)
+    transforms, conf, tree = [None] * n, [0.0] * n, []
+    transforms[reference], conf[reference] = Transform2D.identity(), 1.0
+    group_of, group_tf, group_conf, group_trees = [None] * n, [None] * n, [0.0] * n, []
+    group_of[reference] = 0
+    reasons = ["no pair its matcher is confident of links it to another map"] * n
+    reasons[reference] = ""
+    sets = _linked_sets(est.pair_confidence, MAP_MERGE_CONFIDENCE)
+    others = [m for m in sets if reference not in m]
+    for members in sets:
+        root = reference if reference in members else members[0]
+        if sorted(est.component) == members and reference in members:
+            sub = est   # its largest set, estimated with every map given
+            local = list(range(n))
+        else:
+            sub = mod.estimate_maps([grids[k] for k in members], chaining=chaining,
+                                    reference=members.index(root), seed=seed,
+                                    confidence=MAP_MERGE_CONFIDENCE)
+            local = members
+        placed = {local[a]: t for a, t in enumerate(sub.transforms) if t is not None}
+        if root not in placed:
+            continue    # the set's own estimate left its first map out: nothing to place by
+        if reference in members:
+            for k, t in placed.items():
+                transforms[k] = t
+                conf[k] = 1.0 if k == reference else float(sub.confidences[local.index(k)])
+                group_of[k], reasons[k] = 0, ""
+            tree = [(local[a], local[b]) for a, b in sub.tree] if sub is not est else list(sub.tree)
+        else:
+            number = others.index(members) + 1
+            for k, t in placed.items():
+                group_of[k], group_tf[k] = number, t
+                group_conf[k] = 1.0 if k == root else float(sub.confidences[local.index(k)])
+                reasons[k] = (f"its confidently matched maps do not hold the reference map; it is "
+                              f"kept in group {number} with {len(placed) - 1} other "
+                              f"map{'s' if len(placed) > 2 else ''}")
+            group_trees.append(tuple((local[a], local[b]) for a, b in sub.tree))
+    for k in range(n):
+        if k != reference and transforms[k] is None and group_of[k] is None and any(
+                k in m for m in sets):
+            reasons[k] = "its matcher's estimate of its linked maps left it out"
+    groups = (group_of, group_tf, group_conf, group_trees)
+    return transforms, conf, tree, reasons, {}, groups
+
+
 def _peer(method: str, grids, reference: int, seed: int, emit):
     """Transforms, confidences, tree and reasons of a peer method."""
     module_name, chaining = PEERS[method]
     mod = importlib.import_module(f".{module_name}", __package__)
     n = len(grids)
     if module_name == "map_merge":
-        emit(MergeEvent("align", 0, 1, method))
-        est = mod.estimate_maps(grids, chaining=chaining, reference=reference, seed=seed)
-        transforms = list(est.transforms)
-        conf = [float(c) for c in est.confidences]
-        conf[reference] = 1.0
-        tree = list(est.tree)
-        reasons = ["" if transforms[k] is not None else
-                   "not in the largest group of confidently matched maps" for k in range(n)]
-        groups = ([0 if t is not None else None for t in transforms], [None] * n, [0.0] * n, [])
-        keep = sorted(est.component)
-        if len(keep) >= 2 and reference not in keep:
-            # its largest group holds maps linked among themselves but not the reference: a
-            # group (placed in its first map's frame), not a merge into the reference's map
-            group_of = [0 if k == reference else 1 if k in keep else None for k in range(n)]
-            g_conf = [1.0 if k == keep[0] else float(est.confidences[k]) if k in keep else 0.0
-                      for k in range(n)]
-            groups = (group_of, list(est.group_transforms), g_conf, [tuple(tree)])
-            tree = []
-            for k in keep:
-                reasons[k] = (f"its largest group of confidently matched maps does not hold the "
-                              f"reference map; it is kept in group 1 with {len(keep) - 1} "
-                              f"other map{'s' if len(keep) > 2 else ''}")
-        return transforms, conf, tree, reasons, {}, groups
+        return _map_merge(mod, method, chaining, grids, reference, seed, emit)
     accepted = {}
     todo = list(itertools.combinations(range(n), 2))
     estimates = {}
