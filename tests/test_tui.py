@@ -909,6 +909,20 @@ async def test_a_merge_refused_for_another_robots_scans_says_so_whole_naming_the
         await until(pilot, lambda: not app.main.merging)
 
 
+async def test_the_result_tab_before_any_run_says_what_to_do(in_root):
+    """Before any run the Result tab showed its headings alone (at 80 x 24 the fused map's own
+    words had no room)."""
+    app = make_app(["run"])
+    async with app.run_test(size=(80, 24)) as pilot:
+        await ready(pilot)
+        await pilot.press("4")
+        await pilot.pause()
+        why = app.main.query_one("#why")
+        assert "no merge yet" in str(why.render()) and why.size.height >= 1
+        await run_merge(pilot)
+        assert "no merge yet" not in str(why.render())
+
+
 _STUCK_MERGE = """
 import pathlib, threading, sys
 import fusionkit_tui.runner as runner

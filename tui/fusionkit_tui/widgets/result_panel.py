@@ -111,6 +111,9 @@ class ResultPanel(Vertical):
     def on_mount(self) -> None:
         self.query_one("#fused-map", MapPreview).clear("no merge yet: press r to run")
         self.query_one("#metrics").display = False
+        # said under the first heading too: the map's own words need room to show
+        self.query_one("#why", Static).update("no merge yet: choose two or more maps (1 Maps) "
+                                              "and press r to run")
 
     @property
     def result(self):
