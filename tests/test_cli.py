@@ -314,6 +314,27 @@ def test_two_maps_whose_paths_differ_only_where_clipped_print_apart():
     assert short[1].startswith("a.yaml" + " " * 22 + " yes")
 
 
+def test_a_map_merged_by_a_methods_own_rule_that_the_test_doubts_is_noted():
+    """A peer's or the paper's merge at confidence 0.00 read as a success: exit 0, no word."""
+    from fusionkit.cli.merge import format_placements
+    from fusionkit.pipeline import MapPlacement, MergeConfig
+    from fusionkit.transform import Transform2D
+
+    def table(method):
+        class Result:
+            placements = [MapPlacement(0, "a", True, Transform2D.identity(), 1.0),
+                          MapPlacement(1, "b", True, Transform2D(1.0, 2.0, 3.0), 0.0),
+                          MapPlacement(2, "c", True, Transform2D(1.0, 2.0, 0.0), 0.97)]
+            fusion_order = ((0, 1), (0, 2))
+            config = MergeConfig(method=method)
+            seconds = {"total": 0.1}
+        return format_placements(Result, ["a.yaml", "b.yaml", "c.yaml"])
+
+    assert ("note: 1 map merged by spectral-pso's own rule at confidence under 0.50, where the "
+            "test cannot tell it from a wrong placement: b.yaml") in table("spectral-pso")
+    assert "note:" not in table("consensus")
+
+
 def test_a_number_that_rounds_to_zero_prints_as_0_not_minus_0():
     """evaluate printed "-0.0" for a true heading of -1e-9 rad."""
     from fusionkit.labels import fixed

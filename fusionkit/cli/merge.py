@@ -237,6 +237,14 @@ def format_placements(result, names) -> str:
                          f"{fixed(t.y, 8, 2)} {fixed(math.degrees(t.theta), 11, 1)}")
     order = ", ".join(f"{names[a]} + {names[b]}" for a, b in result.fusion_order) or "(none)"
     lines.append(f"fusion order: {order}")
+    unsure = [p for p in result.placements
+              if p.merged and p.index != result.config.reference and p.confidence < 0.5]
+    if unsure and result.config.method != "consensus":
+        # merged by the method's own rule, where the common test cannot tell it from chance
+        lines.append(f"note: {len(unsure)} map{'s' if len(unsure) > 1 else ''} merged by "
+                     f"{result.config.method}'s own rule at confidence under 0.50, where the test "
+                     f"cannot tell {'them' if len(unsure) > 1 else 'it'} from a wrong placement: "
+                     + ", ".join(str(names[p.index]) for p in unsure))
     lines.append(f"method: {result.config.method}; time: "
                  + ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items()))
     return "\n".join(lines)
