@@ -430,6 +430,12 @@ def earlier_run(tmp_path_factory):
     return out
 
 
+def _as_at_a_terminal():
+    """The child takes a hang-up as a program started at a terminal does, even when these tests
+    run under ``nohup`` (which starts every process with SIGHUP ignored)."""
+    signal.signal(signal.SIGHUP, signal.SIG_DFL)
+
+
 @pytest.mark.parametrize("k, how, code", [(0, "SIGINT", 130), (0, "SIGTERM", 143),
                                           (6, "SIGTERM", 143), (9, "SIGINT", 130),
                                           (-1, "SIGINT", 130), (-1, "SIGTERM", 143),
@@ -446,7 +452,8 @@ def test_a_signalled_command_exits_130_or_143_with_one_line_and_its_outputs_unch
     proc = subprocess.run(
         [sys.executable, "-c", _CLI, str(k), how, "simulate", "--robots", "3", "--poses", "40",
          "--seed", "2", "--out", str(earlier_run), "--quiet"],
-        capture_output=True, text=True, timeout=300, env=env, cwd=ROOT)
+        capture_output=True, text=True, timeout=300, env=env, cwd=ROOT,
+        preexec_fn=_as_at_a_terminal)
     assert proc.returncode == code, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr

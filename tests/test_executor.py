@@ -443,7 +443,10 @@ def test_a_terminal_signal_stops_a_dask_run_with_one_line(tmp_path, sig, code, s
                              "sys.exit(main(sys.argv[1:]))", "bench", "--worlds", "cave", "--cases", "40",
                              "--backend", "dask", "--workers", "2", "--out", str(tmp_path / "sweep")],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True, env=env)
+                            start_new_session=True, env=env,
+                            # a hang-up ends it as at a terminal, even when the tests run
+                            # under nohup (which starts every process with SIGHUP ignored)
+                            preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_DFL))
     try:
         first = proc.stderr.readline()  # "dask: 2 workers at ...": the cluster is up
         assert first.startswith("dask:"), first
