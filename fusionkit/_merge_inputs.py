@@ -95,6 +95,25 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
     return out
 
 
+def _compared(originals: list[OccupancyGrid], at_reference: list[OccupancyGrid],
+              ref: int) -> list[OccupancyGrid]:
+    """The maps as a method compares them: at the finest cell size of the maps with walls, so
+    that no map loses detail and the decision does not depend on which map is the reference (a
+    small window of a 0.05 m map, brought to the cells of a 0.1 m reference, kept too few walls
+    and was refused, where with the window as the reference the two were merged).
+    ``at_reference`` (the maps at the reference's cell size, which they are fused at) is given
+    back when that is the finest, or when the maps at the finest would be more cells than
+    fusionkit holds."""
+    usable = [k for k, g in enumerate(originals) if g.occupied_mask().any()]
+    finest = min(usable, key=lambda k: originals[k].resolution, default=ref)
+    if originals[finest].resolution >= originals[ref].resolution * (1 - 1e-9):
+        return at_reference
+    try:
+        return _same_resolution(originals, finest)
+    except InputError:
+        return at_reference
+
+
 def _keep_walls(fine: OccupancyGrid, sampled: OccupancyGrid) -> OccupancyGrid:
     """``sampled`` (``fine`` at coarser cells, each the fine cell under its centre) with every
     coarse cell that holds a fine wall cell occupied, and every one that holds a known cell

@@ -1,8 +1,9 @@
 """The whole chain of the paper's Fig. 1 behind one call: :func:`merge`.
 
-:func:`merge` loads and checks the maps, brings them to one resolution, hands them to the
-chosen method (:mod:`fusionkit.methods`: the paper's method, the consensus method or a classic
-peer, all behind one interface), fuses every placed map into the reference frame (Section 3.6,
+:func:`merge` loads and checks the maps, brings them to one resolution (the finest of them, to
+place them; the reference's, to fuse them), hands them to the chosen method
+(:mod:`fusionkit.methods`: the paper's method, the consensus method or a classic peer, all behind
+one interface), fuses every placed map into the reference frame (Section 3.6,
 :mod:`fusionkit.fusion`) and builds the :class:`MergeResult`. For the paper's method
 (:mod:`fusionkit.methods.paper`) that is, in the order of Fig. 1:
 
@@ -38,7 +39,8 @@ from .methods.base import MergeEvent, MergeStep, PreparedMaps
 from .methods.consensus import ConsensusConfig
 from .pairing import FusionPlan
 from .pso import PSOConfig, _is_int
-from ._merge_inputs import _same_resolution, _unusable, check_scans, load_inputs, scans_labels
+from ._merge_inputs import (_compared, _same_resolution, _unusable, check_scans, load_inputs,
+                            scans_labels)
 from .scanlog import ScanLog
 from .transform import Transform2D
 
@@ -399,14 +401,15 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
     check_scans(grids, scans, scans_labels(maps) if grids is not maps else
                 [f"scans[{k}] (of map {names[k]})" for k in range(len(grids))])
     originals = list(grids)
-    grids = _same_resolution(originals, config.reference)
+    grids = _same_resolution(originals, config.reference)    # fused at the reference's cells
+    compared = _compared(originals, grids, config.reference)  # placed at the finest
 
     def emit(ev: MergeEvent):
         if callback is not None and callback(ev):
             raise MergeCancelled("merge cancelled")
 
     method = get_method(config.method)
-    placed = method.place(PreparedMaps(tuple(grids), tuple(scans), tuple(names), config.reference),
+    placed = method.place(PreparedMaps(tuple(compared), tuple(scans), tuple(names), config.reference),
                           method.settings(config), emit)
     seconds.update(placed.seconds)
 

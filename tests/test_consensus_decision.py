@@ -160,6 +160,34 @@ def test_a_map_finer_than_the_reference_is_placed_as_the_reverse_order_places_it
     assert back.error_to(first.placements[1].transform)[0] < 2 * coarse.resolution
 
 
+def test_two_maps_of_two_cell_sizes_get_one_decision_whichever_is_the_reference(monkeypatch):
+    """A 4 m window of the Georgia Tech lab at 0.05 m cells and an 8 m window around it at
+    0.1 m: with the fine map as the reference the coarse one was placed, with the coarse map as
+    the reference the fine one, brought to 0.1 m, kept too few walls and was refused. The maps
+    are compared at the finest cell size whichever is the reference, and fused at the
+    reference's."""
+    lab = load_map(REAL / "gatech_ilab.yaml")
+    t, res = lab.trinary(), lab.resolution
+
+    def window(r, c, size):
+        return OccupancyGrid(np.array(t[r:r + size, c:c + size]), res,
+                             (lab.origin[0] + c * res, lab.origin[1] + r * res, 0.0))
+    fine, coarse = window(100, 60, 80), _coarser(window(60, 20, 160))
+    first, second = merge([fine, coarse]), merge([coarse, fine])
+    assert first.placements[1].merged, first.placements[1].reason
+    assert second.placements[1].merged, second.placements[1].reason
+    for placed in (first.placements[1].transform, second.placements[1].transform.inverse):
+        assert placed.error_to(Transform2D.identity())[0] < 2 * coarse.resolution
+    assert first.fused.grid.resolution == fine.resolution
+    assert second.fused.grid.resolution == coarse.resolution
+    # maps that would be too many cells at the finest cell size are compared at the
+    # reference's, as before, rather than refused
+    import fusionkit._merge_inputs as inputs
+    monkeypatch.setattr(inputs, "MAX_CELLS", 20_000)    # the coarse map is 25600 at 0.05 m
+    again = merge([coarse, fine])
+    assert again.fused.grid.resolution == coarse.resolution and again.placements[0].merged
+
+
 def _padded(grid: OccupancyGrid, cells: int) -> OccupancyGrid:
     """The same map in the same frame, with ``cells`` unknown cells around it."""
     x, y, yaw = grid.origin
