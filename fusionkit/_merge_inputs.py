@@ -95,18 +95,26 @@ def _same_resolution(grids: list[OccupancyGrid], ref: int) -> list[OccupancyGrid
     return out
 
 
+#: The finest cell size the default method compares maps at, as a share of the reference's:
+#: half (the reference's map 4 times the cells). Finer still, the maps are compared at the
+#: reference's cell size: a 0.25 m campus as the reference of a 0.03 m window, at the window's
+#: cells (69 times as many), took 22 s and 6.1 GB instead of 2.2 s and 0.3 GB.
+FINEST_SHARE = 0.5
+
+
 def _compared(originals: list[OccupancyGrid], at_reference: list[OccupancyGrid],
               ref: int) -> list[OccupancyGrid]:
-    """The maps as a method compares them: at the finest cell size of the maps with walls, so
-    that no map loses detail and the decision does not depend on which map is the reference (a
-    small window of a 0.05 m map, brought to the cells of a 0.1 m reference, kept too few walls
-    and was refused, where with the window as the reference the two were merged).
-    ``at_reference`` (the maps at the reference's cell size, which they are fused at) is given
-    back when that is the finest, or when the maps at the finest would be more cells than
-    fusionkit holds."""
+    """The maps as the default method compares them: at the finest cell size of the maps with
+    walls, down to half the reference's, so that no map loses detail and the decision depends
+    less on which map is the reference (a small window of a 0.05 m map, brought to the cells of
+    a 0.1 m reference, kept too few walls and was refused, where with the window as the
+    reference the two were merged). ``at_reference`` (the maps at the reference's cell size,
+    which they are fused at) is given back when that is the finest, when the finest is under
+    half of it, or when the maps at the finest would be more cells than fusionkit holds."""
     usable = [k for k, g in enumerate(originals) if g.occupied_mask().any()]
     finest = min(usable, key=lambda k: originals[k].resolution, default=ref)
-    if originals[finest].resolution >= originals[ref].resolution * (1 - 1e-9):
+    res, ref_res = originals[finest].resolution, originals[ref].resolution
+    if res >= ref_res * (1 - 1e-9) or res < FINEST_SHARE * ref_res * (1 - 1e-9):
         return at_reference
     try:
         return _same_resolution(originals, finest)

@@ -1,10 +1,10 @@
 """The whole chain of the paper's Fig. 1 behind one call: :func:`merge`.
 
-:func:`merge` loads and checks the maps, brings them to one resolution (the finest of them, to
-place them; the reference's, to fuse them), hands them to the chosen method
-(:mod:`fusionkit.methods`: the paper's method, the consensus method or a classic peer, all behind
-one interface), fuses every placed map into the reference frame (Section 3.6,
-:mod:`fusionkit.fusion`) and builds the :class:`MergeResult`. For the paper's method
+:func:`merge` loads and checks the maps, brings them to one resolution (for the default method
+the finest of them down to half the reference's, to place them; the reference's, to fuse them),
+hands them to the chosen method (:mod:`fusionkit.methods`: the paper's method, the consensus
+method or a classic peer, all behind one interface), fuses every placed map into the reference
+frame (Section 3.6, :mod:`fusionkit.fusion`) and builds the :class:`MergeResult`. For the paper's method
 (:mod:`fusionkit.methods.paper`) that is, in the order of Fig. 1:
 
 1. every map gets its scans (its ``.scans.npz``, or virtual scans cast in its free space);
@@ -402,7 +402,10 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
                 [f"scans[{k}] (of map {names[k]})" for k in range(len(grids))])
     originals = list(grids)
     grids = _same_resolution(originals, config.reference)    # fused at the reference's cells
-    compared = _compared(originals, grids, config.reference)  # placed at the finest
+    # the default method compares them at the finest cell size (down to half the reference's);
+    # the paper's and the peers' rules were set on maps of one cell size
+    compared = (_compared(originals, grids, config.reference) if config.method == "consensus"
+                else grids)
 
     def emit(ev: MergeEvent):
         if callback is not None and callback(ev):
