@@ -4,8 +4,8 @@
 the finest of them down to half the reference's, to place them; the reference's, to fuse them),
 hands them to the chosen method (:mod:`fusionkit.methods`: the paper's method, the consensus
 method or a classic peer, all behind one interface), fuses every placed map into the reference
-frame (Section 3.6, :mod:`fusionkit.fusion`) and builds the :class:`MergeResult`. For the paper's method
-(:mod:`fusionkit.methods.paper`) that is, in the order of Fig. 1:
+frame (Section 3.6, :mod:`fusionkit.fusion`) and builds the :class:`MergeResult`. For the
+paper's method (:mod:`fusionkit.methods.paper`) that is, in the order of Fig. 1:
 
 1. every map gets its scans (its ``.scans.npz``, or virtual scans cast in its free space);
 2. unique poses by the DFT of the scans (Algorithm 1, :mod:`fusionkit.unique_poses`);
@@ -402,16 +402,14 @@ def merge(maps: Sequence, *, scans: Sequence[ScanLog | None] | None = None,
                 [f"scans[{k}] (of map {names[k]})" for k in range(len(grids))])
     originals = list(grids)
     grids = _same_resolution(originals, config.reference)    # fused at the reference's cells
-    # the default method compares them at the finest cell size (down to half the reference's);
-    # the paper's and the peers' rules were set on maps of one cell size
-    compared = (_compared(originals, grids, config.reference) if config.method == "consensus"
-                else grids)
+    method = get_method(config.method)
+    compared = (_compared(originals, grids, config.reference)
+                if getattr(method, "finest_cells", False) else grids)
 
     def emit(ev: MergeEvent):
         if callback is not None and callback(ev):
             raise MergeCancelled("merge cancelled")
 
-    method = get_method(config.method)
     placed = method.place(PreparedMaps(tuple(compared), tuple(scans), tuple(names), config.reference),
                           method.settings(config), emit)
     seconds.update(placed.seconds)

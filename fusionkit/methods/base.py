@@ -156,7 +156,9 @@ class MethodResult:
 
 
 class Method(Protocol):
-    """The interface every merging method implements."""
+    """The interface every merging method implements. A method whose class sets
+    ``finest_cells = True`` gets maps of several cell sizes at the finest of them (down to half
+    the reference's); the others get them at the reference's."""
 
     name: str
 

@@ -33,6 +33,9 @@ class ConsensusMethod:
     """The consensus method (:mod:`fusionkit.methods.consensus`)."""
 
     name = CONSENSUS
+    #: maps of several cell sizes compared at the finest (the paper's and the peers' rules were
+    #: set on maps of one cell size)
+    finest_cells = True
 
     def settings(self, config) -> ConsensusSettings:
         cfg = config.consensus if config.consensus is not None else ConsensusConfig()
