@@ -124,6 +124,18 @@ def test_a_map_without_walls_is_left_out_by_the_papers_method_and_the_rest_merge
     assert res.placements[0].merged and res.placements[2].merged
 
 
+def test_a_map_without_walls_given_first_is_left_out_by_the_papers_method(sim):
+    """With the wall-less map first and another map the reference, the paper's order placed the
+    wall-less map first and aligned the next to its empty masks: the whole merge ended with "an
+    empty mask" instead of that map's own reason."""
+    grids = [r.grid for r in sim.robots[:2]]
+    grids[0] = grids[0].with_data(np.where(grids[0].data >= 50, 0, grids[0].data))
+    res = merge(grids, config=MergeConfig(method="spectral-pso", seed=1, reference=1))
+    gone = res.placements[0]
+    assert not gone.merged and gone.reason == "it holds no wall (occupied cell) to place it by"
+    assert res.placements[1].merged and res.placements[1].transform is not None
+
+
 def test_maps_of_different_worlds_are_not_merged():
     a = simulate(make_world("office", seed=1), SimulationConfig(robots=1, poses=800, seed=1)).robots[0]
     b = simulate(make_world("cave", seed=2), SimulationConfig(robots=1, poses=800, seed=2)).robots[0]

@@ -67,6 +67,12 @@ class SpectralPSO:
 
         for k, (g, s) in enumerate(zip(grids, scans)):
             emit(MergeEvent("scans", k, len(grids), names[k]))
+            if k != ref and not g.occupied_mask().any():
+                # no wall to align (the map's reason is the pipeline's): out of the plan, so
+                # that it is never the first map placed, whose masks the others align to
+                logs.append(None)
+                virtual.append(False)
+                continue
             if s is None:
                 try:
                     s = virtual_scans(g, n_poses=config.virtual_poses, seed=config.seed + k)
