@@ -329,6 +329,16 @@ def test_one_case_on_one_world_is_said_in_the_singular(tmp_path, capsys):
     assert "1 case (1 crop) on 1 world (cave)" in (tmp_path / "o" / "bench.md").read_text()
 
 
+def test_bench_md_names_only_the_worlds_its_cases_were_drawn_on(tmp_path, capsys):
+    """With fewer cases than worlds, bench.md said the cases ran "on 2 worlds (cave, office)"
+    where the printed line said 1 of 2 and its table by world listed one."""
+    assert main(["bench", "--worlds", "cave", "office", "--cases", "1", "--methods", "map-merge",
+                 "--modes", "crop", "--out", str(tmp_path / "o")]) == 0
+    assert "1 case on 1 of 2 worlds in" in capsys.readouterr().out
+    md = (tmp_path / "o" / "bench.md").read_text()
+    assert "1 case (1 crop) on 1 world (cave), 1 more not drawn on (fewer cases than worlds)" in md
+
+
 def test_worlds_naming_none_benches_the_folders_alone_and_says_so(tmp_path, monkeypatch, capsys):
     """``--worlds`` with no name said "..., and the built-in worlds" and benched none of them;
     with no ./maps it failed on "(no folder given)"."""

@@ -129,11 +129,15 @@ def format_markdown(result: BenchResult, summary: dict | None = None) -> str:
     modes = {}
     for rec in result.cases:
         modes[rec["mode"]] = modes.get(rec["mode"], 0) + 1
+    # the worlds the cases were drawn on (fewer cases than worlds leave the rest unused)
+    used = [w.name for w in result.worlds if any(rec["world"] == w.name for rec in result.cases)]
+    unused = len(result.worlds) - len(used)
     lines = [
         "# fusionkit bench",
         "",
         f"{count(len(result.cases), 'case')} ({', '.join(f'{n} {m}' for m, n in modes.items())}) on "
-        f"{count(len(result.worlds), 'world')} ({', '.join(w.name for w in result.worlds)}); K = "
+        f"{count(len(used), 'world')} ({', '.join(used)})"
+        + (f", {unused} more not drawn on (fewer cases than worlds)" if unused else "") + "; K = "
         f"{', '.join(str(k) for k in cfg.robots)} maps per case; pair overlap >= {cfg.min_overlap:g}; "
         f"seed {cfg.seed}; wall time {result.seconds:.0f} s.",
         "",
