@@ -243,6 +243,30 @@ def test_a_map_given_twice_is_refused_in_one_line(tmp_path, capsys):
     assert not (tmp_path / "m.yaml").exists()
 
 
+def test_the_world_map_of_a_run_is_refused_as_a_merge_input(tmp_path, capsys):
+    """``merge run/*.yaml`` fused the run's ground truth in with its robots without a word, and
+    ``evaluate`` then said the merged map was not of that run."""
+    run = tmp_path / "run"
+    assert main(["simulate", "--robots", "2", "--poses", "40", "--out", str(run), "--quiet"]) == 0
+    argv = ["merge", str(run / "robot_1.yaml"), str(run / "robot_2.yaml"), str(run / "world.yaml"),
+            "-o", str(tmp_path / "m.yaml")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "world.yaml" in err[0] and "ground-truth map of its run" in err[0], err
+    assert "leave it out of the merge" in err[0] and not (tmp_path / "m.yaml").exists()
+    # the terminal UI's merge of the same files, given on its command line, says the same
+    from fusionkit_tui.runner import run_merge
+    with pytest.raises(InputError, match="ground-truth map of its run"):
+        run_merge(argv[1:4], MergeConfig(method="map-merge"))
+    # a copy of it outside the run is a map like any other
+    (tmp_path / "plan").mkdir()
+    for suffix in (".yaml", ".pgm"):
+        (tmp_path / "plan" / f"world{suffix}").write_bytes((run / f"world{suffix}").read_bytes())
+    assert main(["merge", str(run / "robot_1.yaml"), str(tmp_path / "plan" / "world.yaml"), "-o",
+                 str(tmp_path / "m.yaml"), "--quiet"]) in (0, 3)
+    assert (tmp_path / "m.yaml").exists()
+
+
 def test_a_merge_never_writes_over_the_ground_truth_of_the_inputs_run(tmp_path, capsys):
     """Merging two robots of a run into the run's folder may not replace its world map, another
     robot's map or truth.json: ``fusionkit evaluate`` reads them afterwards."""

@@ -73,6 +73,7 @@ def run(args) -> int:
     inputs = list(args.maps)
     check_writable([out, image_path, report_path])
     check_distinct([("-o", out), ("the output's image", image_path), ("--report", report_path)])
+    check_no_truth_world(inputs)
     guard = OutputGuard.of(inputs)
     guard.check([out, image_path, report_path])
     if report_path.suffix.lower() in (".yaml", ".yml", ".pgm", ".png", ".npz"):
@@ -215,6 +216,27 @@ def run_truth(inputs) -> list[Path]:
             continue  # not a run's truth after all: only the file itself is kept
         out += _protected([t.world, *(_map_of(t, name) for name in t.robots)])
     return out
+
+
+def check_no_truth_world(inputs) -> None:
+    """Refuse a map that is the ground-truth world of its run (the ``world`` of a
+    ``truth.json`` beside it): fused in, it fills the merged map with the truth, and the run's
+    evaluation cannot score the merge (``fusionkit evaluate`` knows it as no robot's map)."""
+    from ..errors import FusionkitError
+    from .evaluate import _same_file, read_truth
+
+    for m in inputs:
+        truth = Path(m).parent / "truth.json"
+        if not Path(m).name or not truth.is_file():
+            continue
+        try:
+            world = read_truth(truth).world
+        except (FusionkitError, OSError):
+            continue   # not a run's truth: nothing to tell the world by
+        if _same_file(Path(m), Path(world)):
+            raise InputError(f"{show(str(m), 200)}: the ground-truth map of its run ({truth} names "
+                             f"it as the world), not a robot's map: leave it out of the merge "
+                             f"(the robots' maps are the ones {truth.name} names)")
 
 
 def format_placements(result, names) -> str:

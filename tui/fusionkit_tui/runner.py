@@ -254,8 +254,10 @@ def run_merge(inputs: Sequence, config: MergeConfig,
     from dataclasses import replace
 
     from fusionkit._merge_inputs import check_scans, scans_labels
+    from fusionkit.cli.merge import check_no_truth_world
     from fusionkit.pipeline import load_inputs
 
+    check_no_truth_world(inputs)
     labels = list(labels) if labels is not None else map_labels(inputs)
     grids, scans = load_inputs([str(p) for p in inputs])
     check_scans(grids, scans, scans_labels(inputs))   # named by their files, as merge names them
