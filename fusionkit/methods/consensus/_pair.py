@@ -443,13 +443,17 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     else:
         # "99% of the walls meet where wrong placements reach 13%" read as a clear win: the
         # count of walls, too small to be sure among the placements tried, is what decides
+        # (the share is of the cells counted, both maps' together: the smaller of the two
+        # maps' shares read "0% meet" beside "9 meet and 0 miss" when one map had no wall there)
         chk = best.check
-        reason = (f"best placement is not distinguishable from chance: of the walls of the map "
-                  f"that agrees less, {100 * chk.score:.0f}% meet the other's, where wrong "
-                  f"placements of these maps reach {100 * null.p0:.0f}%, but over too few walls "
-                  f"({chk.agreeing} wall cells meet and {chk.disagreeing} miss, both maps' together) "
-                  f"to be sure among the placements tried: 10^{log_nfa:.1f} wrong placements are "
-                  f"expected to fit as well, where {eps:g} is allowed")
+        counted = chk.agreeing + chk.disagreeing
+        share = 100 * chk.agreeing / counted if counted else 0.0
+        reason = (f"best placement is not distinguishable from chance: {chk.agreeing} wall cells "
+                  f"meet the other map's walls and {chk.disagreeing} miss them (both maps' "
+                  f"together: {share:.0f}% meet, where at wrong placements of these maps "
+                  f"{100 * null.p0:.0f}% do), too few walls to be sure among the placements "
+                  f"tried: 10^{log_nfa:.1f} wrong placements are expected to fit as well, where "
+                  f"{eps:g} is allowed")
     if cfg.polish:
         # what was decided stays; the placements handed on lose the pairing's bias (._polish)
         done = {id(best): best if on_scans else replace(best, transform=polish(a, b, best.transform))}
