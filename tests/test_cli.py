@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import re
 import subprocess
 import sys
@@ -414,6 +415,11 @@ def test_a_map_the_papers_method_leaves_out_has_confidence_0_with_its_agreement_
     assert left and all(m["confidence"] == 0.0 for m in left), left
     assert all(re.search(r"best alignment agrees on \d+% of \d+ overlapping wall cells", m["reason"])
                for m in left), left
+    # and names the maps it was aligned to: those merged before it in the order
+    order = [os.path.splitext(os.path.basename(m["input"]))[0] for m in report["maps"]]
+    for m in left:
+        named = re.search(r"with the maps placed before it \(([^)]*)\)$", m["reason"])
+        assert named and named[1].split(", ") and all(n in order for n in named[1].split(", ")), m
 
 
 def test_a_loop_of_symbolic_links_is_one_line_and_exit_2(tmp_path, capsys):

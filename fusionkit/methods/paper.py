@@ -195,9 +195,11 @@ class SpectralPSO:
                 # as many digits as tell the share from the threshold (69.96% read "70%, needs 70%")
                 digits = next((d for d in range(4) if f"{100 * score:.{d}f}"
                                != f"{100 * config.accept:.{d}f}"), 0)
+                # named with the maps it was aligned to: the fused map of those placed so far
                 reasons[new] = (f"best alignment agrees on {100 * score:.{digits}f}% of {cells} "
                                 f"overlapping wall cells (needs {100 * config.accept:.{digits}f}% "
-                                f"of >= {config.min_overlap_cells})")
+                                f"of >= {config.min_overlap_cells}) with the maps placed before it "
+                                f"({', '.join(names[k] for k in placed)})")
         seconds["align"] = time.perf_counter() - t0
 
         # express everything in the reference map's frame
