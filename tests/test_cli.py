@@ -406,10 +406,20 @@ def test_an_upper_case_output_name_is_taken_and_an_empty_report_path_refused(tmp
     assert not (tmp_path / "m.yaml").exists()
 
 
-def test_a_map_the_papers_method_leaves_out_has_confidence_0_with_its_agreement_in_the_reason(tmp_path):
+def test_a_map_the_papers_method_leaves_out_has_confidence_0_with_its_agreement_in_the_reason(tmp_path, capsys):
     """Left out, robot_2 and robot_4 of this run read confidence 0.32 and 0.45 (their best
     alignment's agreement), where every other method gives a map it leaves out 0."""
     assert main(["run", "--robots", "5", "--poses", "200", "--out", str(tmp_path / "r")]) == 3
+    # Table 1 keeps the rows that need the maps left out, blank on fusionkit's side (they were
+    # dropped, the oracle's with them); a line below the table says so
+    printed = capsys.readouterr().out.splitlines()
+    last = next(line for line in printed if line.startswith("M1,2,3,4,5 "))
+    ours, oracle = last.split("|")[1:3]
+    assert not ours.strip() and len(oracle.split()) == 5, last
+    assert any(line.endswith("left out by the merge: the oracle fuses them last, and fusionkit's "
+                             "cells of rows M1,2,3,4, M1,2,3,4,5 are blank") or
+               line.endswith("left out by the merge: the oracle fuses it last, and fusionkit's "
+                             "cells of row M1,2,3,4,5 are blank") for line in printed), printed
     report = json.loads((tmp_path / "r" / "merged.report.json").read_text())
     left = [m for m in report["maps"] if not m["merged"]]
     assert left and all(m["confidence"] == 0.0 for m in left), left

@@ -87,7 +87,7 @@ def format_run(result, names, errors) -> str:
 def run(args) -> int:
     from ..fusion import fuse_maps
     from ..mapio import group_map_files, load_map, save_maps
-    from ..metrics import format_table1, table1, transform_errors
+    from ..metrics import format_table1, table1, table1_label, transform_errors
     from ..pipeline import merge
     from ..sim_output import check_run_dir
     from ..simulate import SimulationConfig, simulate, write_run
@@ -127,7 +127,10 @@ def run(args) -> int:
     rows = table1(result.fused.steps, world, ref_true)
     oracle_tf = [ref_true.inverse @ r.transform for r in sim.robots]
     order = list(result.order)
-    oracle = fuse_maps([r.grid for r in sim.robots], oracle_tf, order=order, keep_steps=True)
+    # the maps the merge left out are fused last by the oracle: the rows that need them are
+    # blank on fusionkit's side only
+    left = [k for k in range(len(sim.robots)) if k not in order]
+    oracle = fuse_maps([r.grid for r in sim.robots], oracle_tf, order=order + left, keep_steps=True)
     oracle_rows = table1(oracle.steps, world, ref_true)
     errors = [None if p.transform is None else
               transform_errors(p.transform, oracle_tf[p.index], world.resolution)
@@ -142,6 +145,11 @@ def run(args) -> int:
     print()
     print(fusion_order_line(result, names))
     print(format_table1(rows, paper=True, oracle=oracle_rows))
+    if left:
+        blank = [table1_label(k) for k in range(len(rows), len(oracle_rows))]
+        print(f"{', '.join(names[k] for k in left)} left out by the merge: the oracle fuses "
+              f"{'them' if len(left) > 1 else 'it'} last, and fusionkit's cells of row"
+              f"{'s' if len(blank) > 1 else ''} {', '.join(blank)} are blank")
     print("\nAll columns in percent, measured on the world's cells (docs/formats.md, metrics):")
     for line in COLUMNS:
         print(f"  {line}")
