@@ -310,7 +310,11 @@ def test_a_new_run_into_a_folder_takes_the_merges_of_the_old_robots_with_them(tm
     (run / "notes.json").write_text('{"mine": true}')
     capsys.readouterr()
     assert main(["simulate", "--robots", "2", "--poses", "40", "--seed", "5", "--out", str(run)]) == 0
-    assert "removed the earlier robots' merges: merged.yaml, m2.yaml" in capsys.readouterr().out
+    # every file taken away is said: robot_3's too (only the merges' YAML files were)
+    said = capsys.readouterr().out
+    assert ("removed the earlier run's files that this one makes wrong: m2.pgm, m2.yaml, "
+            "merged.pgm, merged.report.json, merged.yaml, r.json, robot_3.pgm, robot_3.scans.npz, "
+            "robot_3.yaml") in said, said
     assert sorted(p.name for p in run.iterdir()) == [
         "notes.json", "robot_1.pgm", "robot_1.scans.npz", "robot_1.yaml", "robot_2.pgm",
         "robot_2.scans.npz", "robot_2.yaml", "truth.json", "world.pgm", "world.yaml"]

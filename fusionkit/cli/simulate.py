@@ -113,16 +113,17 @@ def run(args) -> int:
     progress = Progress("simulating", enabled=None if not args.quiet else False)
     sim = simulate(world, config, progress=progress)
     progress.close()
-    from ..sim_output import merges_of_run
-
-    old_merges = [p for p in merges_of_run(Path(args.out)) if p.suffix in (".yaml", ".yml")]
+    # what the write takes away of an earlier run: the robots this run has not, their merges
+    out = Path(args.out)
+    before = {p.name for p in out.iterdir() if p.is_file()} if out.is_dir() else set()
     truth = write_run(sim, args.out, world_path=args.world)
     seconds = time.perf_counter() - t0
+    removed = sorted(before - {p.name for p in out.iterdir() if p.is_file()})
     if not args.quiet:
         print(format_summary(sim, source))
         print(f"wrote {len(sim.robots)} robot maps, scans and {truth} in {seconds:.1f} s")
-        if old_merges:
-            print(f"removed the earlier robots' merges: {', '.join(p.name for p in old_merges)}")
+        if removed:
+            print(f"removed the earlier run's files that this one makes wrong: {', '.join(removed)}")
     return 0
 
 
