@@ -57,7 +57,8 @@ def run(args) -> int:
 
     out = Path(args.output)
     if out.suffix.lower() not in (".yaml", ".yml"):   # (M.YAML too, as maps are read)
-        raise InputError(f"{show(str(out), 200)}: the output must be a map YAML path ending in .yaml")
+        raise InputError(f"{show(str(out), 200)}: the output must be a map YAML path ending in .yaml "
+                         f"(or .yml)")
     if args.report is not None and not str(args.report).strip():
         raise InputError("--report is empty: give the report's path, or leave --report out for "
                          f"{out.stem}.report.json beside the map")

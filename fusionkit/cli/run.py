@@ -22,8 +22,10 @@ COLUMNS = (
 
 #: Why the first row differs from the paper's.
 M1_NOTE = (
-    "Row M1 is the first map of the fusion order alone, before any fusion: it measures how much "
-    "of the world that robot explored and how its map draws walls, not the fusion. The paper's "
+    "Row M1 is the first map of the fusion order alone, before any fusion, placed in the world "
+    "by its transform into the reference's frame: it measures how much of the world that robot "
+    "explored and how its map draws walls, and, beside the oracle's M1, how well that one map "
+    "was placed (when it is not the reference). The paper's "
     "world and trajectories are not published, so its M1 (one robot's map that already "
     "covers 80 % of its building) cannot be matched; compare fusionkit with the oracle columns "
     "instead: the same maps fused with the true transforms, the best any method can do."
