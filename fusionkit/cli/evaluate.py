@@ -422,10 +422,16 @@ def format_evaluation(result: dict) -> str:
     # of a group's map, whether the map is in it (the report has each of them left out of the
     # merged map)
     column = "in map" if result.get("group") else "merged"
+    # the map column as wide as the names, up to 40 characters; names cut there that would
+    # read alike are shown whole (as merge's table does)
+    names = [str(r["input"]) for r in result["maps"]]
+    width = max(24, min(40, max(map(len, names), default=0)))
+    labels = [clip_left(n, width) for n in names]
+    if len(set(labels)) < len(set(names)):
+        labels, width = names, max(map(len, names))
     lines += ["", f"per map ({where}):",
-              f"  {'map':<24} {column:<6} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'th (deg)':>8}"
+              f"  {'map':<{width}} {column:<6} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'th (deg)':>8}"
               f" {'true x':>8} {'true y':>8} {'true th':>8} {'err (m)':>8} {'cells':>6} {'deg':>6}"]
-    labels = [clip_left(r["input"], 24) for r in result["maps"]]
     for k, r in enumerate(result["maps"]):
         t, tt, e = r["transform"], r["true_transform"], r["error"]
         conf = f"{r['confidence']:5.2f}" if r["confidence"] is not None else f"{'-':>5}"
@@ -433,7 +439,7 @@ def format_evaluation(result: dict) -> str:
                if t is not None else f"{'-':>8} {'-':>8} {'-':>8}")
         err = (f"{e['translation_m']:8.3f} {e['translation_cells']:6.1f} {e['rotation_deg']:6.2f}"
                if e is not None else f"{'-':>8} {'-':>6} {'-':>6}")
-        lines.append(f"  {labels[k]:<24} {'yes' if r['merged'] else 'no':<6} {conf} {est} "
+        lines.append(f"  {labels[k]:<{width}} {'yes' if r['merged'] else 'no':<6} {conf} {est} "
                      f"{fixed(tt['x'], 8, 2)} {fixed(tt['y'], 8, 2)} "
                      f"{fixed(math.degrees(tt['theta']), 8, 1)} {err}")
     return "\n".join(lines)
