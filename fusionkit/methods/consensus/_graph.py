@@ -6,7 +6,9 @@
 1. Loops of three accepted pairs are checked: going ``i -> j -> k`` must put map ``k`` where
    ``i -> k`` does. A pair that breaks more loops than it closes is dropped; between pairs that
    break as many, loops through *witnesses* decide (pairs whose placement is meaningful, fewer
-   than one false alarm expected, without reaching the risk accepted), then the weaker evidence.
+   than one false alarm expected, without reaching the risk accepted) and loops through pairs
+   that fit in several places (closed when one of those places is where the loop puts the map),
+   then the weaker evidence.
 2. An ambiguous pair (several distinct placements verify) is decided by loops through a third
    map: when exactly one of its placements closes loops with the other two pairs (accepted
    pairs first; then witnesses too), it is taken.
@@ -205,6 +207,15 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                 for a, b in ((wik, ekj), (eik, wkj)):
                     if a is not None and b is not None:
                         hint[(i, j)] += 1 if consistent(i, k, j, a[0], b[0], edges[(i, j)][0]) else -1
+                # and loops through a pair that fits in several places, closed when one of its
+                # placements is where the accepted pair and the pair in doubt put it: in rows of
+                # racks a placement one period off overlaps more than the truth, and the weaker
+                # evidence alone would drop the truth
+                tij = edges[(i, j)][0]
+                if ekj is not None and (opts := _options({}, ambiguous, i, k)):
+                    hint[(i, j)] += 1 if any(consistent(i, k, j, t, ekj[0], tij) for t, _ in opts) else -1
+                if eik is not None and (opts := _options({}, ambiguous, k, j)):
+                    hint[(i, j)] += 1 if any(consistent(i, k, j, eik[0], t, tij) for t, _ in opts) else -1
         e = min(worst, key=lambda e: (good[e] - bad[e], hint[e], edges[e][2]))
         dropped.append(e)
         del edges[e]

@@ -28,6 +28,13 @@ def _trials(chk) -> tuple[float, float]:
     return float(chk.agreeing), float(chk.agreeing + chk.disagreeing + 2 * chk.conflicts)
 
 
+def hit_share(chk) -> float:
+    """The share of a check's wall cells that meet the other map's walls, a cell on its clear
+    free space counted as three misses (:func:`_trials`); 0 when none is compared."""
+    k, n = _trials(chk)
+    return k / n if n > 0 else 0.0
+
+
 def weighted_misses(chk) -> float:
     """The wall cells of a check that miss the other map's walls, a cell on its clear free space
     counted three times: the misses of :func:`_trials`."""
