@@ -26,7 +26,9 @@ class ConsensusConfig:
         most this, and no distinct placement is nearly as good: one whose share of meeting
         walls is not significantly lower (at this risk) and whose false alarms are fewer than
         ``1 / max_false_merge`` times the best's or whose evidence is at least ``rival`` times
-        the best's. Its meaning does not depend on the maps' cell size, extent or clutter.
+        the best's; nor one that passes the test itself and meets walls at least as often as the
+        best, whatever its evidence (``fits_as_well``). Its meaning does not depend on the maps'
+        cell size, extent or clutter.
     null_samples : int
         Wrong placements sampled (ICP from random starts) for the null distribution.
     null_wide_points : int
@@ -70,7 +72,8 @@ class ConsensusConfig:
     rival : float
         A distinct placement with at least this fraction of the best one's evidence
         (:meth:`Check.evidence`) whose share of meeting walls is not significantly lower is a
-        rival. In the graph stage, a map that fits a third map in several places about equally
+        rival (so is one that passes the test and meets walls at least as often, whatever its
+        evidence). In the graph stage, a map that fits a third map in several places about equally
         well has repeated structure, so its single fit elsewhere whose evidence is less than
         ``1 / rival`` times those must be confirmed by a loop.
     cross_wall : float

@@ -146,6 +146,13 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                and not p.diagnostics.get("rivals") and not p.diagnostics.get("slides")}
     dropped: list = []
     resolved: list = []
+    # the pairs found ambiguous by the pair stage (not those step 0 demotes, which failed every
+    # loop with the accepted pairs) break ties in step 1: their placements k -> i that do not slide
+    found_ambiguous = dict(ambiguous)
+
+    def several_places(i, k) -> list:
+        slide = sliding.get((i, k) if (i, k) in found_ambiguous else (k, i), set())
+        return [t for t, m in _options({}, found_ambiguous, i, k) if m not in slide]
 
     def consistent(i, j, k, tij, tjk, tik) -> bool:
         return displacement(tij @ tjk, tik, boxes[k]) <= tol
@@ -210,12 +217,13 @@ def solve_graph(pairs: dict, indexes: list, reference: int, cfg: ConsensusConfig
                 # and loops through a pair that fits in several places, closed when one of its
                 # placements is where the accepted pair and the pair in doubt put it: in rows of
                 # racks a placement one period off overlaps more than the truth, and the weaker
-                # evidence alone would drop the truth
+                # evidence alone would drop the truth (a pair whose places close loops with each
+                # pair in doubt adds as much to each, and decides nothing)
                 tij = edges[(i, j)][0]
-                if ekj is not None and (opts := _options({}, ambiguous, i, k)):
-                    hint[(i, j)] += 1 if any(consistent(i, k, j, t, ekj[0], tij) for t, _ in opts) else -1
-                if eik is not None and (opts := _options({}, ambiguous, k, j)):
-                    hint[(i, j)] += 1 if any(consistent(i, k, j, eik[0], t, tij) for t, _ in opts) else -1
+                if ekj is not None and (opts := several_places(i, k)):
+                    hint[(i, j)] += 1 if any(consistent(i, k, j, t, ekj[0], tij) for t in opts) else -1
+                if eik is not None and (opts := several_places(k, j)):
+                    hint[(i, j)] += 1 if any(consistent(i, k, j, eik[0], t, tij) for t in opts) else -1
         e = min(worst, key=lambda e: (good[e] - bad[e], hint[e], edges[e][2]))
         dropped.append(e)
         del edges[e]

@@ -428,10 +428,12 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     if accepted:
         reason = ""
     elif ambiguous:
-        scores = [100 * c.check.score for c in [best] + rivals]
+        # the shares the rival test compares (a wall on open floor three misses)
+        lo, hi = (f"{100 * f(hit_share(c.check) for c in [best] + rivals):.0f}" for f in (min, max))
         reason = (f"ambiguous: {len(rivals) + 1} distinct placements fit about as well "
-                  f"({min(scores):.0f}-{max(scores):.0f}% of the walls meet) and the maps alone "
-                  "cannot tell them apart")
+                  f"({lo if lo == hi else f'{lo}-{hi}'}% of the walls meet, a wall on the other "
+                  "map's open floor counted as three misses) and the maps alone cannot tell them "
+                  "apart")
     elif significant:
         reason = (f"the placement may slide: the walls that meet all run one way (a straight wall, "
                   f"a corridor's two sides) and only {across:.2f} m of meeting wall runs across "
@@ -457,14 +459,13 @@ def estimate_indexed(a: MapIndex, b: MapIndex, cfg: ConsensusConfig, *, hist_a, 
     else:
         # "99% of the walls meet where wrong placements reach 13%" read as a clear win: the
         # count of walls, too small to be sure among the placements tried, is what decides
-        # (the share is of the cells counted, both maps' together: the smaller of the two
+        # (the share the test weighs, of both maps' cells together: the smaller of the two
         # maps' shares read "0% meet" beside "9 meet and 0 miss" when one map had no wall there)
         chk = best.check
-        counted = chk.agreeing + chk.disagreeing
-        share = 100 * chk.agreeing / counted if counted else 0.0
         reason = (f"best placement is not distinguishable from chance: {chk.agreeing} wall cells "
-                  f"meet the other map's walls and {chk.disagreeing} miss them (both maps' "
-                  f"together: {share:.0f}% meet, where at wrong placements of these maps "
+                  f"meet the other map's walls and {chk.disagreeing} miss them, {chk.conflicts} "
+                  f"of those on its open floor (counting those three times, "
+                  f"{100 * hit_share(chk):.0f}% meet, where at wrong placements of these maps "
                   f"{100 * null.p0:.0f}% do), too few walls to be sure among the placements "
                   f"tried: 10^{log_nfa:.1f} wrong placements are expected to fit as well, where "
                   f"{eps:g} is allowed")
