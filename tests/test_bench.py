@@ -336,7 +336,8 @@ def test_bench_md_names_only_the_worlds_its_cases_were_drawn_on(tmp_path, capsys
                  "--modes", "crop", "--out", str(tmp_path / "o")]) == 0
     assert "1 case on 1 of 2 worlds in" in capsys.readouterr().out
     md = (tmp_path / "o" / "bench.md").read_text()
-    assert "1 case (1 crop) on 1 world (cave), 1 more not drawn on (fewer cases than worlds)" in md
+    assert ("1 case (1 crop) on 1 world (cave), 1 more not drawn on (--cases 1 draws on 1 of the 2 "
+            "map worlds)") in md
 
 
 def test_worlds_naming_none_benches_the_folders_alone_and_says_so(tmp_path, monkeypatch, capsys):

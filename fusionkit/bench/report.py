@@ -129,15 +129,18 @@ def format_markdown(result: BenchResult, summary: dict | None = None) -> str:
     modes = {}
     for rec in result.cases:
         modes[rec["mode"]] = modes.get(rec["mode"], 0) + 1
-    # the worlds the cases were drawn on (fewer cases than worlds leave the rest unused)
+    # the worlds the cases were drawn on: a log is always split; --cases below the number of
+    # map worlds leaves the rest of them unused
     used = [w.name for w in result.worlds if any(rec["world"] == w.name for rec in result.cases)]
     unused = len(result.worlds) - len(used)
+    maps = sum(w.log is None for w in result.worlds)
     lines = [
         "# fusionkit bench",
         "",
         f"{count(len(result.cases), 'case')} ({', '.join(f'{n} {m}' for m, n in modes.items())}) on "
         f"{count(len(used), 'world')} ({', '.join(used)})"
-        + (f", {unused} more not drawn on (fewer cases than worlds)" if unused else "") + "; K = "
+        + (f", {unused} more not drawn on (--cases {cfg.cases} draws on {maps - unused} of the "
+           f"{maps} map worlds)" if unused else "") + "; K = "
         f"{', '.join(str(k) for k in cfg.robots)} maps per case; pair overlap >= {cfg.min_overlap:g}; "
         f"seed {cfg.seed}; wall time {result.seconds:.0f} s.",
         "",

@@ -220,24 +220,29 @@ def run_truth(inputs) -> list[Path]:
 
 
 def check_no_truth_world(inputs) -> None:
-    """Refuse a map that is the ground-truth world of its run (the ``world`` of a
-    ``truth.json`` beside it): fused in, it fills the merged map with the truth, and the run's
-    evaluation cannot score the merge (``fusionkit evaluate`` knows it as no robot's map)."""
+    """Refuse a map that is the ground-truth world of a run an input stands in (the ``world``
+    of a ``truth.json`` beside any input, wherever that world lies) and none of its robots'
+    maps: fused in, it fills the merged map with the truth, and the run's evaluation cannot
+    score the merge (``fusionkit evaluate`` knows it as no robot's map)."""
     from ..errors import FusionkitError
-    from .evaluate import _same_file, read_truth
+    from .evaluate import _map_of, _same_file, read_truth
 
-    for m in inputs:
-        truth = Path(m).parent / "truth.json"
-        if not Path(m).name or not truth.is_file():
+    for folder in dict.fromkeys(Path(m).parent for m in inputs if Path(m).name):
+        truth = folder / "truth.json"
+        if not truth.is_file():
             continue
         try:
-            world = read_truth(truth).world
+            t = read_truth(truth)
         except (FusionkitError, OSError):
             continue   # not a run's truth: nothing to tell the world by
-        if _same_file(Path(m), Path(world)):
-            raise InputError(f"{show(str(m), 200)}: the ground-truth map of its run ({truth} names "
-                             f"it as the world), not a robot's map: leave it out of the merge "
-                             f"(the robots' maps are the ones {truth.name} names)")
+        robots = [_map_of(t, name) for name in t.robots]
+        for m in inputs:
+            if (Path(m).name and _same_file(Path(m), Path(t.world))
+                    and not any(_same_file(Path(m), r) for r in robots)):
+                raise InputError(f"{show(str(m), 200)}: the ground-truth map of a run "
+                                 f"({show(str(truth), 200)} names it as the world), not a robot's "
+                                 f"map: leave it out of the merge (the robots' maps are the ones "
+                                 f"{truth.name} names)")
 
 
 def format_placements(result, names) -> str:

@@ -151,7 +151,7 @@ def run(args) -> int:
         blank = [table1_label(k) for k in range(len(rows), len(oracle_rows))]
         print(f"{', '.join(names[k] for k in left)} left out by the merge: the oracle fuses "
               f"{'them' if len(left) > 1 else 'it'} last, and fusionkit's cells of row"
-              f"{'s' if len(blank) > 1 else ''} {', '.join(blank)} are blank")
+              f"{f's {blank[0]} to {blank[-1]}' if len(blank) > 1 else f' {blank[0]}'} are blank")
     print("\nAll columns in percent, measured on the world's cells (docs/formats.md, metrics):")
     for line in COLUMNS:
         print(f"  {line}")

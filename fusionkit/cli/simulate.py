@@ -123,7 +123,8 @@ def run(args) -> int:
         print(format_summary(sim, source))
         print(f"wrote {len(sim.robots)} robot maps, scans and {truth} in {seconds:.1f} s")
         if removed:
-            print(f"removed the earlier run's files that this one makes wrong: {', '.join(removed)}")
+            shown = ", ".join(removed[:12]) + (f" and {len(removed) - 12} more" if len(removed) > 12 else "")
+            print(f"removed the earlier run's files that this one makes wrong: {shown}")
     return 0
 
 
