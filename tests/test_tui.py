@@ -526,7 +526,9 @@ async def test_invalid_settings_block_the_run_with_a_message(in_root):
         await pilot.press("ctrl+r")
         await pilot.pause()
         assert not screen.merging and not [w for w in app.workers if w.group == "merge"]
-        assert any(n.severity == "error" and "particles" in n.message for n in app._notifications)
+        # said once: ctrl+r while typing gave the run's notice and the field's own as it was left
+        said = [n.message for n in app._notifications if n.severity == "error" and "particles" in n.message]
+        assert len(said) == 1 and "the merge will not run until it is fixed" in said[0], said
         await type_setting(pilot, "particles", "12")
         assert not inp.has_class("-invalid")
         assert screen.settings.config().pso.particles == 12

@@ -279,6 +279,16 @@ class SettingsForm(VerticalScroll, can_focus=True):
         return True
 
     def action_run_from_field(self) -> None:
+        field = self._field()
+        key = (field.id or "").removeprefix("set-") if field is not None else ""
+        for s in SETTINGS:
+            if s.key == key:
+                try:
+                    parse_setting(s, field.value)
+                except InputError:
+                    # leaving the field says what is wrong with it; the run would say it again
+                    self.focus()
+                    return
         self.screen.action_run()
 
     def action_leave_field(self) -> None:
