@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 from typing import Sequence
 
-__all__ = ["unique_labels", "clip_left", "fixed", "count"]
+__all__ = ["unique_labels", "clip_left", "clip_column", "fixed", "count"]
 
 _MAP_SUFFIXES = (".yaml", ".yml")
 
@@ -72,6 +72,17 @@ def clip_left(text: str, width: int) -> str:
     if len(text) <= width:
         return text
     return "…" + text[len(text) - width + 1:]
+
+
+def clip_column(names: Sequence, width: int) -> tuple[list[str], int]:
+    """``names`` cut to ``width`` (:func:`clip_left`) and the column's width; whole, and the
+    column as wide as the longest, when two that differ only where they were cut would read
+    alike."""
+    names = [str(n) for n in names]
+    shown = [clip_left(n, width) for n in names]
+    if len(set(shown)) < len(set(names)):
+        return names, max(map(len, names))
+    return shown, width
 
 
 def fixed(value: float, width: int, digits: int) -> str:

@@ -20,7 +20,7 @@ from pathlib import Path
 from .._atomic import show
 from .._inputs import read_json
 from ..errors import InputError
-from ..labels import clip_left, fixed
+from ..labels import clip_column, fixed
 from ..mapio import map_digest
 from ..transform import Transform2D
 
@@ -425,10 +425,7 @@ def format_evaluation(result: dict) -> str:
     # the map column as wide as the names, up to 40 characters; names cut there that would
     # read alike are shown whole (as merge's table does)
     names = [str(r["input"]) for r in result["maps"]]
-    width = max(24, min(40, max(map(len, names), default=0)))
-    labels = [clip_left(n, width) for n in names]
-    if len(set(labels)) < len(set(names)):
-        labels, width = names, max(map(len, names))
+    labels, width = clip_column(names, max(24, min(40, max(map(len, names), default=0))))
     lines += ["", f"per map ({where}):",
               f"  {'map':<{width}} {column:<6} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'th (deg)':>8}"
               f" {'true x':>8} {'true y':>8} {'true th':>8} {'err (m)':>8} {'cells':>6} {'deg':>6}"]

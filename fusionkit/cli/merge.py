@@ -11,7 +11,7 @@ from pathlib import Path
 
 from .._atomic import check_distinct, check_not_input, check_writable, show
 from ..errors import InputError
-from ..labels import clip_left, fixed
+from ..labels import clip_column, fixed
 from ._common import Progress, add_merge_options, int_range, merge_config_from_args
 from ._executor import add_executor_options, executor_from_args
 
@@ -201,22 +201,31 @@ def run_truth(inputs) -> list[Path]:
     """The ground truth of each run an input map stands in (a ``truth.json`` beside it): that
     file, the world map it names and the run's robot maps, with their images. A merge written
     over one of them would spoil the run's evaluation (``fusionkit evaluate``)."""
-    from ..errors import FusionkitError
     from ..mapio import _protected
-    from .evaluate import _map_of, read_truth
+    from .evaluate import _map_of
 
     out: list[Path] = []
+    for truth, t in _truths_beside(inputs):
+        out.append(truth)
+        if t is not None:   # (not a run's truth after all: only the file itself is kept)
+            out += _protected([t.world, *(_map_of(t, name) for name in t.robots)])
+    return out
+
+
+def _truths_beside(inputs):
+    """``(path, Truth or None)`` of each ``truth.json`` beside an input map, once per folder
+    (None when it cannot be read as a run's truth)."""
+    from ..errors import FusionkitError
+    from .evaluate import read_truth
+
     for folder in dict.fromkeys(Path(m).parent for m in inputs):
         truth = folder / "truth.json"
         if not truth.is_file():
             continue
-        out.append(truth)
         try:
-            t = read_truth(truth)
+            yield truth, read_truth(truth)
         except (FusionkitError, OSError):
-            continue  # not a run's truth after all: only the file itself is kept
-        out += _protected([t.world, *(_map_of(t, name) for name in t.robots)])
-    return out
+            yield truth, None
 
 
 def check_no_truth_world(inputs) -> None:
@@ -224,16 +233,10 @@ def check_no_truth_world(inputs) -> None:
     of a ``truth.json`` beside any input, wherever that world lies) and none of its robots'
     maps: fused in, it fills the merged map with the truth, and the run's evaluation cannot
     score the merge (``fusionkit evaluate`` knows it as no robot's map)."""
-    from ..errors import FusionkitError
-    from .evaluate import _map_of, _same_file, read_truth
+    from .evaluate import _map_of, _same_file
 
-    for folder in dict.fromkeys(Path(m).parent for m in inputs if Path(m).name):
-        truth = folder / "truth.json"
-        if not truth.is_file():
-            continue
-        try:
-            t = read_truth(truth)
-        except (FusionkitError, OSError):
+    for truth, t in _truths_beside(inputs):
+        if t is None:
             continue   # not a run's truth: nothing to tell the world by
         robots = [_map_of(t, name) for name in t.robots]
         for m in inputs:
@@ -247,12 +250,8 @@ def check_no_truth_world(inputs) -> None:
 
 def format_placements(result, names) -> str:
     """A table of each map's placement, for the terminal."""
-    width = 28
-    shown = [clip_left(str(n), width) for n in names]
-    if len(set(shown)) < len({str(n) for n in names}):
-        # two paths that differ only where they were clipped printed as the same map: whole
-        shown = [str(n) for n in names]
-        width = max(len(n) for n in shown)
+    # two paths that differ only where they were clipped printed as the same map: whole
+    shown, width = clip_column(names, 28)
     lines = [f"{'map':<{width}} {'merged':<7} {'conf':>5} {'x (m)':>8} {'y (m)':>8} {'theta (deg)':>11}"]
     for p in result.placements:
         name = shown[p.index]

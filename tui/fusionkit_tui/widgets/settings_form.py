@@ -121,6 +121,12 @@ def _settings() -> tuple[Setting, ...]:
 SETTINGS = _settings()
 
 
+def _setting_of(widget) -> Setting | None:
+    """The setting a form field (``#set-KEY``) edits, or None."""
+    key = (widget.id or "").removeprefix("set-")
+    return next((s for s in SETTINGS if s.key == key), None)
+
+
 def parse_setting(s: Setting, text: str):
     """The value of ``text`` for setting ``s``.
 
@@ -280,15 +286,14 @@ class SettingsForm(VerticalScroll, can_focus=True):
 
     def action_run_from_field(self) -> None:
         field = self._field()
-        key = (field.id or "").removeprefix("set-") if field is not None else ""
-        for s in SETTINGS:
-            if s.key == key:
-                try:
-                    parse_setting(s, field.value)
-                except InputError:
-                    # leaving the field says what is wrong with it; the run would say it again
-                    self.focus()
-                    return
+        s = _setting_of(field) if field is not None else None
+        if s is not None:
+            try:
+                parse_setting(s, field.value)
+            except InputError:
+                # leaving the field says what is wrong with it; the run would say it again
+                self.focus()
+                return
         self.screen.action_run()
 
     def action_leave_field(self) -> None:
@@ -303,24 +308,23 @@ class SettingsForm(VerticalScroll, can_focus=True):
 
     @on(Input.Blurred)
     def _on_blurred(self, event: Input.Blurred) -> None:
-        key = (event.input.id or "").removeprefix("set-")
-        for s in SETTINGS:
-            if s.key == key:
-                try:
-                    value = parse_setting(s, event.input.value)
-                except InputError as exc:
-                    self._hint(s, str(exc).split(": ", 1)[-1])
-                    event.input.add_class("-invalid")
-                    self.notify(f"{exc}; the merge will not run until it is fixed",
-                                title="Check the settings", severity="error", timeout=6)
-                    return
-                default = s.default
-                if value != default:
-                    was = "blank" if default is None else _default_text(s)
-                    now = "blank" if value is None else event.input.value.strip()
-                    self.query_one(f"#hint-{s.key}", Static).update(
-                        Text.assemble((f"set to {now}", "bold"), f" (default {was}): {s.help}"))
-                return
+        s = _setting_of(event.input)
+        if s is None:
+            return
+        try:
+            value = parse_setting(s, event.input.value)
+        except InputError as exc:
+            self._hint(s, str(exc).split(": ", 1)[-1])
+            event.input.add_class("-invalid")
+            self.notify(f"{exc}; the merge will not run until it is fixed",
+                        title="Check the settings", severity="error", timeout=6)
+            return
+        default = s.default
+        if value != default:
+            was = "blank" if default is None else _default_text(s)
+            now = "blank" if value is None else event.input.value.strip()
+            self.query_one(f"#hint-{s.key}", Static).update(
+                Text.assemble((f"set to {now}", "bold"), f" (default {was}): {s.help}"))
 
     def _describe(self, widget) -> None:
         """Say in full what the field ``widget`` is, and what is wrong with its value."""
