@@ -377,13 +377,14 @@ def test_long_map_paths_are_cut_with_an_ellipsis(scene, capsys):
     assert code == 0, err
     row = next(line for line in out.splitlines() if "robot_2.yaml" in line)
     assert row.split()[0].startswith("…") and row.split()[0].endswith("runs/robot_2.yaml")
-    # a path of 25 characters is shown whole (it was cut at 24, to "…ns/default/robot_2.yaml")
-    report["maps"][1]["input"] = "runs/default/robot_2.yaml"
+    # a path of 26 characters is shown whole (it was cut at 24, to "…where/run/robot_2.yaml");
+    # one that exists nowhere, as above (runs/default/ of the README's first command would)
+    report["maps"][1]["input"] = "elsewhere/run/robot_2.yaml"
     write(root / "out/merged.report.json", report)
     code, out, err = run([root / "out/merged.yaml", "--truth", root / "truth.json"], capsys)
     assert code == 0, err
     row = next(line for line in out.splitlines() if "robot_2.yaml" in line)
-    assert row.split()[0] == "runs/default/robot_2.yaml", row
+    assert row.split()[0] == "elsewhere/run/robot_2.yaml", row
 
 
 def test_a_robots_own_map_is_scored_in_its_own_frame(scene, capsys):
